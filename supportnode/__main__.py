@@ -1,0 +1,5 @@
+import sys
+
+from supportnode.cli import main
+
+sys.exit(main())

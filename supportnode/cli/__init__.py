@@ -1,0 +1,50 @@
+"""The `supportnode` command: parses, dispatches to one module per subcommand, turns errors
+into one line on stderr and an exit code (2 for bad input, 130 for Ctrl-C)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from supportnode import __version__
+from supportnode.errors import SupportNodeError
+
+# name -> (module, one-line help). Each module defines `add_arguments(parser)` and `run(args) -> int`;
+# modules are imported only when their command runs, so optional extras stay optional.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "detect": ("supportnode.cli.detect", "find support surfaces and objects in one cloud file"),
+    "sim": ("supportnode.cli.sim", "simulate scenes with ground truth (sampled, lidar, camera)"),
+    "eval": ("supportnode.cli.evaluate", "score a detect output against simulator ground truth"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="supportnode", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"supportnode {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module_name, help_text) in COMMANDS.items():
+        sp = sub.add_parser(name, help=help_text, description=help_text)
+        sp.set_defaults(_module=module_name)
+        importlib.import_module(module_name).add_arguments(sp)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(importlib.import_module(args._module).run(args) or 0)
+    except SupportNodeError as err:
+        print(f"supportnode {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

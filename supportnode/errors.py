@@ -1,0 +1,32 @@
+"""Exception hierarchy. The library raises; only the CLI prints and exits.
+
+Every message is one line that says what went wrong and where (file, line, key, topic).
+"""
+
+
+class SupportNodeError(Exception):
+    """Root of every error supportnode raises on bad input or configuration."""
+
+
+class CloudFormatError(SupportNodeError):
+    """A point-cloud file cannot be read or written (missing, unknown format, truncated, empty)."""
+
+
+class ConfigError(SupportNodeError):
+    """A configuration file or override is invalid (unknown key, wrong type, out of range)."""
+
+
+class SceneError(SupportNodeError):
+    """A simulator scene description is invalid."""
+
+
+class ProtocolError(SupportNodeError):
+    """A wire message cannot be decoded or fails validation."""
+
+
+class AlignmentError(SupportNodeError):
+    """Gravity alignment cannot be estimated from the cloud (e.g. no horizontal surface in view)."""
+
+
+class InputError(SupportNodeError):
+    """Numeric input that geometry cannot use (wrong shape, non-finite values, no points)."""

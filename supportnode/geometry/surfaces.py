@@ -1,0 +1,61 @@
+"""Support surfaces: horizontal regions a robot can stand, land or put things on.
+
+Two methods share one result type:
+- ``seed``: Algorithm 1 of the report as published (voxels with more than ``p_min`` points, grown
+  through horizontally adjacent voxels of the same height layer, regions of ``psi_min`` voxels).
+- ``planar`` (default): per-voxel plane fits from moments; only flat, near-horizontal voxels grow;
+  growth may cross height layers within ``max_step``; minimum area and width in metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Surface:
+    """One support surface. Lengths in metres, z up."""
+
+    id: int
+    height: float  # median z of the surface points
+    area: float  # footprint area, m^2
+    centroid: np.ndarray  # (3,) float64
+    normal: np.ndarray  # (3,) float64 unit, z >= 0, from a plane fit to the surface points
+    flatness: float  # rms distance of the surface points to that plane
+    bbox_min: np.ndarray  # (3,) float64
+    bbox_max: np.ndarray  # (3,) float64
+    outline: list[np.ndarray]  # 2-D polygons (K, 2) float64 in x, y: [outer, hole, hole, ...]
+    point_count: int
+    voxel_count: int
+    cells: np.ndarray  # (C, 2) int64 footprint cells (ix, iy) on the grid of size cell_size
+    cell_size: tuple[float, float]  # (vx, vy) of the footprint grid; cell (i, j) spans
+    # x in [i*vx, (i+1)*vx), y in [j*vy, (j+1)*vy)
+    width: float = 0.0  # largest inscribed square-ish width of the footprint, m
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary (no numpy types)."""
+        return {
+            "id": int(self.id),
+            "height": float(self.height),
+            "area": float(self.area),
+            "width": float(self.width),
+            "centroid": [float(v) for v in self.centroid],
+            "normal": [float(v) for v in self.normal],
+            "flatness": float(self.flatness),
+            "bbox_min": [float(v) for v in self.bbox_min],
+            "bbox_max": [float(v) for v in self.bbox_max],
+            "outline": [np.round(p, 4).tolist() for p in self.outline],
+            "point_count": int(self.point_count),
+            "voxel_count": int(self.voxel_count),
+        }
+
+
+@dataclass
+class SurfaceResult:
+    """Surfaces sorted largest first (ids 0, 1, ... in that order) and a label per point."""
+
+    surfaces: list[Surface]
+    labels: np.ndarray  # (N,) int32: surface id of each input point, -1 when on none
+    stats: dict = field(default_factory=dict)  # counts for diagnostics (voxels, candidates, ...)

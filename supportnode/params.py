@@ -1,0 +1,144 @@
+"""Typed parameters of the geometry, one frozen dataclass per stage.
+
+Each field carries metadata used by `supportnode.config` to document, parse and range-check it:
+``unit`` (SI unit or ``""``), ``help`` (one line), and optional ``min`` / ``max`` (inclusive) or
+``choices``. Defaults here are the built-in defaults (lowest precedence: defaults < YAML < --set).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+def param(default: Any, help: str, unit: str = "", **limits: Any) -> Any:
+    """A dataclass field with documentation and limits for the configuration loader."""
+    meta = {"help": help, "unit": unit, **limits}
+    if isinstance(default, (list, tuple)):
+        return field(default_factory=lambda: tuple(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class SurfaceParams:
+    """Support-surface detection (Algorithm 1 of the report and the planar default)."""
+
+    method: str = param(
+        "planar",
+        "'seed': the report's Algorithm 1 as published; 'planar': per-voxel plane fits, "
+        "growth across height layers, area and width limits",
+        choices=("seed", "planar"),
+    )
+    voxel_size: tuple[float, float, float] = param(
+        (0.1, 0.1, 0.05), "voxel edge lengths vx, vy, vz", "m", min=1e-3, max=10.0
+    )
+    p_min: int = param(2, "a voxel counts only if it holds MORE than p_min points", min=0)
+    psi_min: int = param(
+        10, "seed method: a region is a surface only with at least psi_min voxels", min=1
+    )
+    connectivity: int = param(
+        8, "horizontal neighbourhood for region growing: 4 or 8", choices=(4, 8)
+    )
+    max_tilt_deg: float = param(
+        10.0, "planar: a voxel's fitted normal may deviate from +z by at most this", "deg",
+        min=0.0, max=89.0,
+    )
+    max_roughness: float = param(
+        0.012, "planar: largest rms distance of a voxel's points to its plane", "m", min=0.0
+    )
+    max_step: float = param(
+        0.03, "planar: largest height change between adjacent voxels of one surface", "m",
+        min=0.0,
+    )
+    min_area: float = param(0.04, "planar: smallest surface footprint area", "m^2", min=0.0)
+    min_width: float = param(
+        0.15, "planar: narrowest a surface may be (a rail or wall top is not a surface)", "m",
+        min=0.0,
+    )
+    point_tolerance: float = param(
+        0.02, "planar: a point is on a surface if this close to the surface's local plane "
+        "(widened to 2.5x the surface roughness on noisy clouds)", "m", min=0.0,
+    )
+    normal_filter: bool = param(
+        False, "the report's option: drop points whose k-NN normal is not vertical before "
+        "growing (only candidate points are tested)",
+    )
+    normal_filter_k: int = param(30, "neighbours for the normal filter", min=3, max=500)
+    normal_filter_max_tilt_deg: float = param(
+        20.0, "normal filter: largest angle between a point normal and +z", "deg",
+        min=0.0, max=90.0,
+    )
+
+
+@dataclass(frozen=True)
+class ObjectParams:
+    """Supported-object segmentation (Algorithm 2 of the report and the voxel default)."""
+
+    method: str = param(
+        "voxel", "'knn': the report's Algorithm 2 (sampled k-NN graph); 'voxel': connected "
+        "occupied voxels of a fine grid, no sampling", choices=("knn", "voxel"),
+    )
+    k: int = param(20, "knn: neighbours linked per sampled point", min=1, max=500)
+    sample_fraction: float = param(
+        0.3, "knn: fraction s of the non-surface points sampled", min=1e-4, max=1.0
+    )
+    seed: int = param(0, "random seed for sampling", min=0)
+    label_radius: float = param(
+        0.05, "knn: unsampled points take the label of the nearest sampled point within this",
+        "m", min=0.0,
+    )
+    voxel_size: float = param(0.03, "voxel: edge of the fine grid", "m", min=1e-3, max=1.0)
+    min_points: int = param(30, "smallest cluster kept (smaller ones are noise)", min=1)
+    support_tolerance: float = param(
+        0.05, "a cluster stands on a surface when its lowest points are this close above it",
+        "m", min=0.0,
+    )
+    split_touching: bool = param(
+        True, "split clusters whose footprint has separate parts joined by a thin neck"
+    )
+    split_neck_width: float = param(
+        0.04, "footprint necks narrower than this separate two objects", "m", min=0.0
+    )
+
+
+@dataclass(frozen=True)
+class FreeSpaceParams:
+    """Free (unoccupied) part of each support surface."""
+
+    cell_size: float = param(0.02, "2-D grid cell for the free-space map", "m", min=1e-3)
+    margin: float = param(
+        0.05, "clearance kept around each object footprint", "m", min=0.0
+    )
+
+
+@dataclass(frozen=True)
+class NormalParams:
+    """Per-point normal estimation by k-NN covariance."""
+
+    k: int = param(30, "neighbours per point", min=3, max=500)
+
+
+@dataclass(frozen=True)
+class GravityParams:
+    """Gravity alignment when no IMU gives the up direction."""
+
+    enabled: bool = param(False, "estimate the rotation to gravity from normals")
+    up_hint: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), "approximate up vector in the cloud frame; zeros: decide from the "
+        "scene (sensor above the floor)",
+    )
+    voxel_size: float = param(0.05, "grid for the normals used by alignment", "m", min=1e-3)
+    inlier_angle_deg: float = param(
+        10.0, "normals within this of the up direction refine it", "deg", min=0.1, max=45.0
+    )
+
+
+@dataclass(frozen=True)
+class DetectParams:
+    """Everything `supportnode detect` and the node's detection stage use."""
+
+    surfaces: SurfaceParams = field(default_factory=SurfaceParams)
+    objects: ObjectParams = field(default_factory=ObjectParams)
+    freespace: FreeSpaceParams = field(default_factory=FreeSpaceParams)
+    normals: NormalParams = field(default_factory=NormalParams)
+    gravity: GravityParams = field(default_factory=GravityParams)
