@@ -40,33 +40,47 @@ class SurfaceParams:
         8, "horizontal neighbourhood for region growing: 4 or 8", choices=(4, 8)
     )
     max_tilt_deg: float = param(
-        10.0, "planar: a voxel's fitted normal may deviate from +z by at most this", "deg",
-        min=0.0, max=89.0,
+        10.0,
+        "planar: a voxel's fitted normal may deviate from +z by at most this",
+        "deg",
+        min=0.0,
+        max=89.0,
     )
     max_roughness: float = param(
         0.012, "planar: largest rms distance of a voxel's points to its plane", "m", min=0.0
     )
     max_step: float = param(
-        0.03, "planar: largest height change between adjacent voxels of one surface", "m",
+        0.03,
+        "planar: largest height change between adjacent voxels of one surface",
+        "m",
         min=0.0,
     )
-    min_area: float = param(0.04, "planar: smallest surface footprint area", "m^2", min=0.0)
+    min_area: float = param(0.08, "planar: smallest surface footprint area", "m^2", min=0.0)
     min_width: float = param(
-        0.15, "planar: narrowest a surface may be (a rail or wall top is not a surface)", "m",
+        0.15,
+        "planar: narrowest a surface may be (a rail or wall top is not a surface)",
+        "m",
         min=0.0,
     )
     point_tolerance: float = param(
-        0.02, "planar: a point is on a surface if this close to the surface's local plane "
-        "(widened to 2.5x the surface roughness on noisy clouds)", "m", min=0.0,
+        0.01,
+        "planar: a point is on a surface if this close to the surface's local plane "
+        "(widened to 3x the surface's median voxel roughness on noisy clouds)",
+        "m",
+        min=0.0,
     )
     normal_filter: bool = param(
-        False, "the report's option: drop points whose k-NN normal is not vertical before "
+        False,
+        "the report's option: drop points whose k-NN normal is not vertical before "
         "growing (only candidate points are tested)",
     )
     normal_filter_k: int = param(30, "neighbours for the normal filter", min=3, max=500)
     normal_filter_max_tilt_deg: float = param(
-        20.0, "normal filter: largest angle between a point normal and +z", "deg",
-        min=0.0, max=90.0,
+        20.0,
+        "normal filter: largest angle between a point normal and +z",
+        "deg",
+        min=0.0,
+        max=90.0,
     )
 
 
@@ -75,8 +89,10 @@ class ObjectParams:
     """Supported-object segmentation (Algorithm 2 of the report and the voxel default)."""
 
     method: str = param(
-        "voxel", "'knn': the report's Algorithm 2 (sampled k-NN graph); 'voxel': connected "
-        "occupied voxels of a fine grid, no sampling", choices=("knn", "voxel"),
+        "voxel",
+        "'knn': the report's Algorithm 2 (sampled k-NN graph); 'voxel': connected "
+        "occupied voxels of a fine grid, no sampling",
+        choices=("knn", "voxel"),
     )
     k: int = param(20, "knn: neighbours linked per sampled point", min=1, max=500)
     sample_fraction: float = param(
@@ -84,14 +100,18 @@ class ObjectParams:
     )
     seed: int = param(0, "random seed for sampling", min=0)
     label_radius: float = param(
-        0.05, "knn: unsampled points take the label of the nearest sampled point within this",
-        "m", min=0.0,
+        0.05,
+        "knn: unsampled points take the label of the nearest sampled point within this",
+        "m",
+        min=0.0,
     )
     voxel_size: float = param(0.03, "voxel: edge of the fine grid", "m", min=1e-3, max=1.0)
     min_points: int = param(30, "smallest cluster kept (smaller ones are noise)", min=1)
     support_tolerance: float = param(
-        0.05, "a cluster stands on a surface when its lowest points are this close above it",
-        "m", min=0.0,
+        0.05,
+        "a cluster stands on a surface when its lowest points are this close above it",
+        "m",
+        min=0.0,
     )
     split_touching: bool = param(
         True, "split clusters whose footprint has separate parts joined by a thin neck"
@@ -106,9 +126,7 @@ class FreeSpaceParams:
     """Free (unoccupied) part of each support surface."""
 
     cell_size: float = param(0.02, "2-D grid cell for the free-space map", "m", min=1e-3)
-    margin: float = param(
-        0.05, "clearance kept around each object footprint", "m", min=0.0
-    )
+    margin: float = param(0.05, "clearance kept around each object footprint", "m", min=0.0)
 
 
 @dataclass(frozen=True)
@@ -124,7 +142,8 @@ class GravityParams:
 
     enabled: bool = param(False, "estimate the rotation to gravity from normals")
     up_hint: tuple[float, float, float] = param(
-        (0.0, 0.0, 0.0), "approximate up vector in the cloud frame; zeros: decide from the "
+        (0.0, 0.0, 0.0),
+        "approximate up vector in the cloud frame; zeros: decide from the "
         "scene (sensor above the floor)",
     )
     voxel_size: float = param(0.05, "grid for the normals used by alignment", "m", min=1e-3)

@@ -12,6 +12,27 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from supportnode.errors import InputError
+from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.voxels import (
+    KeyIndex,
+    VoxelGrid,
+    horizontal_offsets,
+    layered_offsets,
+    voxelize,
+)
+from supportnode.params import SurfaceParams
+
+
+def _r(value):
+    """Round a float or array to 7 decimals for JSON (plain Python types)."""
+    if np.ndim(value):
+        return [round(float(v), 7) + 0.0 for v in value]
+    return round(float(value), 7) + 0.0
 
 
 @dataclass
@@ -35,18 +56,19 @@ class Surface:
     width: float = 0.0  # largest inscribed square-ish width of the footprint, m
 
     def to_dict(self) -> dict:
-        """JSON-ready dictionary (no numpy types)."""
+        """JSON-ready dictionary (no numpy types). Floats are rounded to 1e-7 (0.1 um, 1e-7 of
+        a unit normal) so that the output does not depend on summation order."""
         return {
             "id": int(self.id),
-            "height": float(self.height),
-            "area": float(self.area),
-            "width": float(self.width),
-            "centroid": [float(v) for v in self.centroid],
-            "normal": [float(v) for v in self.normal],
-            "flatness": float(self.flatness),
-            "bbox_min": [float(v) for v in self.bbox_min],
-            "bbox_max": [float(v) for v in self.bbox_max],
-            "outline": [np.round(p, 4).tolist() for p in self.outline],
+            "height": _r(self.height),
+            "area": _r(self.area),
+            "width": _r(self.width),
+            "centroid": _r(self.centroid),
+            "normal": _r(self.normal),
+            "flatness": _r(self.flatness),
+            "bbox_min": _r(self.bbox_min),
+            "bbox_max": _r(self.bbox_max),
+            "outline": [np.round(p, 6).tolist() for p in self.outline],
             "point_count": int(self.point_count),
             "voxel_count": int(self.voxel_count),
         }
@@ -59,3 +81,430 @@ class SurfaceResult:
     surfaces: list[Surface]
     labels: np.ndarray  # (N,) int32: surface id of each input point, -1 when on none
     stats: dict = field(default_factory=dict)  # counts for diagnostics (voxels, candidates, ...)
+
+
+def detect_surfaces(points: np.ndarray, params: SurfaceParams | None = None) -> SurfaceResult:
+    """Find support surfaces in a gravity-aligned cloud.
+
+    points: (N, 3) float, metres, z up. Returns surfaces sorted largest first and (N,) labels.
+    """
+    params = params or SurfaceParams()
+    pts = _check_points(points)
+    size = np.asarray(params.voxel_size, dtype=np.float64)
+    keep = None
+    if params.normal_filter and len(pts):
+        keep = _normal_filter_mask(pts, params)
+    grid = voxelize(pts if keep is None else pts[keep], size)
+    if params.method == "seed":
+        surface_of_voxel, stats = _grow_seed(grid, params)
+        voxel_labels = surface_of_voxel[grid.point_voxel]
+        planes = None
+    elif params.method == "planar":
+        surface_of_voxel, planes, stats = _grow_planar(grid, params)
+        voxel_labels = _label_points_planar(
+            pts if keep is None else pts[keep], grid, surface_of_voxel, planes, params
+        )
+    else:
+        raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
+    labels = np.full(len(pts), -1, dtype=np.int64)
+    if keep is None:
+        labels[:] = voxel_labels
+    else:
+        labels[keep] = voxel_labels
+    surfaces, labels = _summarise(pts, labels, grid, surface_of_voxel, params)
+    stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
+    if keep is not None:
+        stats["normal_filter_removed"] = int(len(pts) - keep.sum())
+    return SurfaceResult(surfaces=surfaces, labels=labels.astype(np.int32), stats=stats)
+
+
+def _check_points(points: np.ndarray) -> np.ndarray:
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InputError(f"points must be an (N, 3) array, got shape {pts.shape}")
+    if not np.isfinite(pts).all():
+        bad = int((~np.isfinite(pts).all(axis=1)).sum())
+        raise InputError(f"{bad} points have NaN or Inf coordinates; drop them before detection")
+    return pts
+
+
+def _normal_filter_mask(pts: np.ndarray, params: SurfaceParams) -> np.ndarray:
+    """The report's normal filter, applied to candidate points only (its own improvement):
+    candidates are points in voxels that pass p_min; others cannot be surface points anyway."""
+    from supportnode.geometry.normals import filter_vertical_normals
+
+    grid = voxelize(pts, np.asarray(params.voxel_size, dtype=np.float64))
+    candidate = (grid.counts > params.p_min)[grid.point_voxel]
+    return (
+        filter_vertical_normals(
+            pts, candidate, params.normal_filter_k, params.normal_filter_max_tilt_deg
+        )
+        | ~candidate
+    )
+
+
+def _components(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Connected-component label of each of n nodes given undirected edges."""
+    graph = coo_matrix((np.ones(len(src), dtype=np.int8), (src, dst)), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    return comp
+
+
+def _grow_seed(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, dict]:
+    """Algorithm 1: components of occupied voxels, horizontally adjacent in one layer."""
+    occupied = np.flatnonzero(grid.counts > params.p_min)
+    keys = grid.keys[occupied]
+    index = KeyIndex.build(keys)
+    src, dst = index.neighbour_pairs(keys, horizontal_offsets(params.connectivity))
+    comp = _components(len(occupied), src, dst)
+    size = np.bincount(comp)
+    good = size[comp] >= params.psi_min
+    surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
+    surface_of_voxel[occupied[good]] = comp[good]
+    return surface_of_voxel, {"occupied_voxels": len(occupied)}
+
+
+@dataclass
+class _Planes:
+    """Per-voxel plane of the planar method: a point on it and its unit normal (z > 0)."""
+
+    mean: np.ndarray  # (M, 3)
+    normal: np.ndarray  # (M, 3)
+    roughness: np.ndarray  # (M,) rms distance to the plane, m
+
+
+def _voxel_planes(grid: VoxelGrid, idx: np.ndarray, max_tilt_deg: float) -> _Planes:
+    """Plane fits of the voxels ``idx`` from their moments.
+
+    Points that are (nearly) collinear, such as one lidar ring crossing a voxel, leave the
+    plane undetermined; such a voxel is taken as horizontal exactly when its line is."""
+    cov = grid.covariances()[idx] if len(idx) else np.zeros((0, 3, 3))
+    evals, normal = sym3_eigen(cov)
+    evals = np.maximum(evals, 0.0)
+    normal = np.where(normal[:, 2:3] < 0, -normal, normal)
+    line_like = np.sqrt(evals[:, 1]) < 0.1 * np.sqrt(np.maximum(evals[:, 2], 1e-30))
+    var_z = np.maximum(cov[:, 2, 2], 0.0)
+    line_tilt_sin = np.sqrt(var_z / np.maximum(evals[:, 2], 1e-30))
+    flat_line = line_like & (line_tilt_sin <= np.sin(np.radians(max_tilt_deg)))
+    normal[flat_line] = (0.0, 0.0, 1.0)
+    bad_line = line_like & ~flat_line
+    normal[bad_line] = (1.0, 0.0, 0.0)  # a sloped line: certainly not a horizontal plane
+    roughness = np.sqrt(np.where(line_like, np.minimum(evals[:, 1], var_z), evals[:, 0]))
+    mean = grid.corners[idx] + grid.sums[idx] / grid.counts[idx, None]
+    return _Planes(mean=mean, normal=normal, roughness=roughness)
+
+
+def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _Planes, dict]:
+    """Components of flat, near-horizontal voxels whose planes continue into each other."""
+    dense = np.flatnonzero(grid.counts > max(params.p_min, 2))
+    planes = _voxel_planes(grid, dense, params.max_tilt_deg)
+    ok = (planes.normal[:, 2] >= np.cos(np.radians(params.max_tilt_deg))) & (
+        planes.roughness <= params.max_roughness
+    )
+    cand = dense[ok]
+    cplanes = _Planes(planes.mean[ok], planes.normal[ok], planes.roughness[ok])
+    keys = grid.keys[cand]
+    index = KeyIndex.build(keys)
+    src, dst = index.neighbour_pairs(keys, layered_offsets(params.connectivity))
+    # Each voxel's plane, extended to the other voxel's centroid, must meet it within max_step:
+    # a step, a wall top beside a table or a shelf board above another does not join.
+    d = cplanes.mean[dst] - cplanes.mean[src]
+    gap_src = np.abs(np.einsum("ij,ij->i", d, cplanes.normal[src])) / cplanes.normal[src, 2]
+    gap_dst = np.abs(np.einsum("ij,ij->i", d, cplanes.normal[dst])) / cplanes.normal[dst, 2]
+    joined = np.maximum(gap_src, gap_dst) <= params.max_step
+    comp = _components(len(cand), src[joined], dst[joined])
+
+    vx, vy = params.voxel_size[0], params.voxel_size[1]
+    # Footprint cells per component (a column holding two layers of one surface counts once).
+    _, cell_comp = _unique_cells(keys[:, :2], comp)
+    n_cells = np.bincount(cell_comp, minlength=comp.max() + 1 if len(comp) else 0)
+    big = np.flatnonzero(n_cells * vx * vy >= max(params.min_area, 1e-12))
+    keep_comp = np.zeros(len(n_cells), dtype=bool)
+    widths = np.zeros(len(n_cells))
+    for c in big:  # one footprint raster per sizeable component (tens), not per voxel
+        widths[c] = footprint_width(keys[comp == c, :2], (vx, vy))
+        keep_comp[c] = widths[c] >= params.min_width
+    surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
+    good = keep_comp[comp] if len(comp) else np.zeros(0, dtype=bool)
+    surface_of_voxel[cand[good]] = comp[good]
+    all_planes = _Planes(
+        mean=np.zeros((len(grid.counts), 3)),
+        normal=np.zeros((len(grid.counts), 3)),
+        roughness=np.zeros(len(grid.counts)),
+    )
+    all_planes.mean[cand] = cplanes.mean
+    all_planes.normal[cand] = cplanes.normal
+    all_planes.roughness[cand] = cplanes.roughness
+    stats = {
+        "dense_voxels": len(dense),
+        "candidate_voxels": len(cand),
+        "components": len(n_cells),
+        "rejected_narrow": int(len(big) - keep_comp.sum()),
+    }
+    return surface_of_voxel, all_planes, stats
+
+
+def _unique_cells(cells: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct (component, cell) pairs: returns their cell linear keys and components."""
+    if len(cells) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    c = cells - cells.min(axis=0)
+    span = int(c[:, 1].max()) + 1
+    lin = c[:, 0] * span + c[:, 1]
+    ncell = (int(c[:, 0].max()) + 1) * span
+    pair = np.unique(comp.astype(np.int64) * ncell + lin)
+    return pair % ncell, pair // ncell
+
+
+def footprint_width(cells: np.ndarray, cell_size: tuple[float, float]) -> float:
+    """Width of a 2-D footprint: diameter of the largest inscribed disc, metres.
+
+    cells: (C, 2) int cell coordinates. The raster is upsampled twice so that even widths
+    are not rounded down by a whole cell."""
+    raster, _ = rasterize_cells(cells, upsample=2, pad=1)
+    if not raster.any():
+        return 0.0
+    dist = ndimage.distance_transform_edt(raster)
+    return float(dist.max()) * min(cell_size)
+
+
+def rasterize_cells(cells: np.ndarray, upsample: int = 1, pad: int = 1):
+    """Boolean image of (C, 2) integer cells: image[iy, ix]; returns (image, origin cell)."""
+    cells = np.asarray(cells, dtype=np.int64)
+    origin = cells.min(axis=0) - pad
+    c = cells - origin
+    shape = (int(c[:, 1].max()) + 1 + pad, int(c[:, 0].max()) + 1 + pad)
+    img = np.zeros(shape, dtype=bool)
+    img[c[:, 1], c[:, 0]] = True
+    if upsample > 1:
+        img = np.repeat(np.repeat(img, upsample, axis=0), upsample, axis=1)
+    return img, origin
+
+
+def _label_points_planar(
+    pts: np.ndarray,
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    params: SurfaceParams,
+) -> np.ndarray:
+    """A point is on a surface when it lies within tolerance of the plane of a surface voxel
+    in its own column: its own voxel, or the one just below or above (a noisy or
+    layer-straddling surface spills into neighbouring layers)."""
+    labels = np.full(len(pts), -1, dtype=np.int64)
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    if len(sv) == 0:
+        return labels
+    comp = surface_of_voxel[sv]
+    # Tolerance per surface: widened on rough (noisy) surfaces.
+    med = _median_by_group(planes.roughness[sv], comp, int(comp.max()) + 1)
+    tol_by_comp = np.maximum(params.point_tolerance, 3.0 * med)
+    index = KeyIndex.build(grid.keys[sv])
+    pv = grid.point_voxel
+    best = np.full(len(pts), np.inf)
+    for dz in (0, -1, 1):  # three column neighbours, each vectorised over all voxels/points
+        hit_in_sv = index.find(grid.keys + [0, 0, dz])  # per voxel
+        target = np.where(hit_in_sv >= 0, sv[np.maximum(hit_in_sv, 0)], -1)[pv]
+        has = target >= 0
+        t = target[has]
+        n = planes.normal[t]
+        dist = np.abs(np.einsum("ij,ij->i", pts[has] - planes.mean[t], n)) / n[:, 2]
+        s = surface_of_voxel[t]
+        better = (dist <= tol_by_comp[s]) & (dist < best[has])
+        idx = np.flatnonzero(has)[better]
+        labels[idx] = s[better]
+        best[idx] = dist[better]
+    return labels
+
+
+def _median_by_group(values: np.ndarray, groups: np.ndarray, n: int) -> np.ndarray:
+    """Median of ``values`` within each group 0..n-1 (0 for empty groups)."""
+    out = np.zeros(n)
+    if len(values) == 0:
+        return out
+    order = np.lexsort((values, groups))
+    g, v = groups[order], values[order]
+    starts = np.searchsorted(g, np.arange(n))
+    ends = np.searchsorted(g, np.arange(n), side="right")
+    has = ends > starts
+    mid = (starts + ends - 1) // 2
+    mid2 = (starts + ends) // 2
+    out[has] = 0.5 * (v[mid[has]] + v[np.minimum(mid2[has], len(v) - 1)])
+    return out
+
+
+def _summarise(
+    pts: np.ndarray,
+    comp_labels: np.ndarray,
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    params: SurfaceParams,
+) -> tuple[list[Surface], np.ndarray]:
+    """Per-surface properties from its points; surfaces sorted largest first, ids 0.."""
+    on = np.flatnonzero(comp_labels >= 0)
+    if len(on) == 0:
+        return [], np.full(len(pts), -1, dtype=np.int64)
+    comps, compact = np.unique(comp_labels[on], return_inverse=True)
+    s_count = len(comps)
+    p = pts[on]
+    order = np.argsort(compact, kind="stable")
+    g = compact[order]
+    ps = p[order]
+    starts = np.searchsorted(g, np.arange(s_count))
+    counts = np.diff(np.append(starts, len(g)))
+    centroid = np.add.reduceat(ps, starts, axis=0) / counts[:, None]
+    d = ps - centroid[g]
+    cov = np.einsum("ni,nj->nij", d, d).reshape(len(d), 9)
+    cov = (np.add.reduceat(cov, starts, axis=0) / counts[:, None]).reshape(s_count, 3, 3)
+    evals, normal = sym3_eigen(cov)
+    normal = np.where(normal[:, 2:3] < 0, -normal, normal)
+    flatness = np.sqrt(np.maximum(evals[:, 0], 0.0))
+    bmin = np.minimum.reduceat(ps, starts, axis=0)
+    bmax = np.maximum.reduceat(ps, starts, axis=0)
+    height = _median_by_group(ps[:, 2], g, s_count)
+    vcount = np.bincount(
+        np.searchsorted(comps, surface_of_voxel[surface_of_voxel >= 0]), minlength=s_count
+    )
+
+    vx, vy = float(params.voxel_size[0]), float(params.voxel_size[1])
+    cell_keys = np.floor(ps[:, :2] / (vx, vy)).astype(np.int64)
+    area, cells_of = _footprint_areas(ps[:, :2], cell_keys, g, s_count, (vx, vy))
+
+    rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
+    new_id = np.empty(s_count, dtype=np.int64)
+    new_id[rank] = np.arange(s_count)
+    surfaces = []
+    for sid, c in enumerate(rank):  # one entry per surface
+        cells = cells_of[c]
+        surfaces.append(
+            Surface(
+                id=sid,
+                height=float(height[c]),
+                area=float(area[c]),
+                centroid=centroid[c],
+                normal=normal[c],
+                flatness=float(flatness[c]),
+                bbox_min=bmin[c],
+                bbox_max=bmax[c],
+                outline=cells_outline(cells, (vx, vy)),
+                point_count=int(counts[c]),
+                voxel_count=int(vcount[c]),
+                cells=cells,
+                cell_size=(vx, vy),
+                width=footprint_width(cells, (vx, vy)),
+            )
+        )
+    labels = np.full(len(pts), -1, dtype=np.int64)
+    labels[on] = new_id[compact]
+    return surfaces, labels
+
+
+def _footprint_areas(
+    xy: np.ndarray,
+    cell_keys: np.ndarray,
+    group: np.ndarray,
+    n_groups: int,
+    cell_size: tuple[float, float],
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Area of each group's footprint and its (C, 2) cells.
+
+    Interior cells count whole; a border cell counts the part its points span (plus the mean
+    point spacing), so a table edge that cuts a cell is not rounded up to the cell."""
+    vx, vy = cell_size
+    lo = cell_keys.min(axis=0) - 1
+    ck = cell_keys - lo
+    span = int(ck[:, 1].max()) + 2
+    ncell = (int(ck[:, 0].max()) + 2) * span
+    pair = group.astype(np.int64) * ncell + ck[:, 0] * span + ck[:, 1]
+    order = np.argsort(pair, kind="stable")
+    ps = pair[order]
+    first = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]])
+    upair = ps[first]
+    n_in = np.diff(np.append(first, len(ps)))
+    sxy = xy[order]
+    ext = np.maximum.reduceat(sxy, first, axis=0) - np.minimum.reduceat(sxy, first, axis=0)
+    # n uniform samples span (n-1)/(n+1) of an interval on average: undo that shrinkage.
+    stretch = (n_in + 1) / np.maximum(n_in - 1, 1)
+    frac = np.clip(ext[:, 0] * stretch / vx, 0, 1) * np.clip(ext[:, 1] * stretch / vy, 0, 1)
+    # Too few points, or one scan line crossing the cell, say nothing about coverage.
+    frac[(n_in < 3) | (frac < 0.05)] = 0.5
+    interior = np.ones(len(upair), dtype=bool)
+    for delta in (span, -span, 1, -1):  # the four edge neighbours of each cell
+        q = upair + delta
+        pos = np.minimum(np.searchsorted(upair, q), len(upair) - 1)
+        interior &= upair[pos] == q
+    frac[interior] = 1.0
+    ug = upair // ncell
+    area = np.bincount(ug, weights=frac, minlength=n_groups) * vx * vy
+    local = upair % ncell
+    cells = np.stack([local // span, local % span], axis=1) + lo
+    bounds = np.searchsorted(ug, np.arange(n_groups + 1))
+    return area, [cells[bounds[i] : bounds[i + 1]] for i in range(n_groups)]
+
+
+def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.ndarray]:
+    """Boundary rings of a footprint of (C, 2) integer cells, in metres.
+
+    Returns (K, 2) float64 rings without the closing vertex: counter-clockwise rings bound the
+    surface, clockwise rings are holes. The largest ring comes first. Cells that touch only at
+    a corner give separate rings."""
+    if len(cells) == 0:
+        return []
+    img, origin = rasterize_cells(cells, pad=1)
+    filled = img
+    # Directed boundary edges with the surface on their left, in vertex coordinates (x, y).
+    edges = []
+    jy, ix = np.nonzero(filled & ~np.roll(filled, 1, axis=0))  # nothing below: bottom edge
+    edges.append(np.stack([ix, jy, ix + 1, jy], 1))
+    jy, ix = np.nonzero(filled & ~np.roll(filled, -1, axis=1))  # nothing right
+    edges.append(np.stack([ix + 1, jy, ix + 1, jy + 1], 1))
+    jy, ix = np.nonzero(filled & ~np.roll(filled, -1, axis=0))  # nothing above
+    edges.append(np.stack([ix + 1, jy + 1, ix, jy + 1], 1))
+    jy, ix = np.nonzero(filled & ~np.roll(filled, 1, axis=1))  # nothing left
+    edges.append(np.stack([ix, jy + 1, ix, jy], 1))
+    e = np.concatenate(edges)
+    outgoing: dict[tuple[int, int], list[int]] = {}
+    for i, (x0, y0, _, _) in enumerate(e.tolist()):
+        outgoing.setdefault((x0, y0), []).append(i)
+    used = np.zeros(len(e), dtype=bool)
+    rings = []
+    for start in range(len(e)):  # walks the boundary (perimeter-sized), once per edge
+        if used[start]:
+            continue
+        ring = []
+        cur = start
+        while not used[cur]:
+            used[cur] = True
+            x0, y0, x1, y1 = e[cur]
+            ring.append((x0, y0))
+            dx, dy = x1 - x0, y1 - y0
+            options = [i for i in outgoing.get((x1, y1), []) if not used[i]]
+            if not options:
+                break
+
+            # Prefer the left turn, so corner-touching cells make separate rings.
+            def turn(i: int, dx: int = dx, dy: int = dy) -> int:
+                ex, ey = e[i, 2] - e[i, 0], e[i, 3] - e[i, 1]
+                return -(dx * ey - dy * ex)
+
+            cur = min(options, key=turn)
+        r = np.asarray(ring, dtype=np.float64)
+        r = _drop_collinear(r)
+        rings.append((r + origin) * np.asarray(cell_size))
+    rings.sort(key=lambda r: -abs(_ring_area(r)))
+    return rings
+
+
+def _drop_collinear(ring: np.ndarray) -> np.ndarray:
+    prev = np.roll(ring, 1, axis=0)
+    nxt = np.roll(ring, -1, axis=0)
+    cross = (ring[:, 0] - prev[:, 0]) * (nxt[:, 1] - ring[:, 1]) - (ring[:, 1] - prev[:, 1]) * (
+        nxt[:, 0] - ring[:, 0]
+    )
+    return ring[cross != 0]
+
+
+def _ring_area(ring: np.ndarray) -> float:
+    """Signed shoelace area: positive for counter-clockwise rings."""
+    x, y = ring[:, 0], ring[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))

@@ -1,0 +1,179 @@
+"""Voxel grids: integer keys, point-to-voxel grouping, per-voxel moments and neighbour lookup.
+
+Moments are kept relative to each voxel's corner so that sums of squares stay precise far from
+the origin and can be merged scan after scan (the node's map does exactly that).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from supportnode.errors import InputError
+
+# Order of the six unique entries of a symmetric 3x3 second moment.
+OUTER_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def voxel_keys(points: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """Integer voxel coordinates floor(p / size): (N, 3) float -> (N, 3) int64."""
+    keys = np.floor(np.asarray(points, dtype=np.float64) / size)
+    if keys.size and (np.abs(keys).max() >= 2**40):
+        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
+    return keys.astype(np.int64)
+
+
+@dataclass
+class KeyIndex:
+    """Sorted linear keys of a set of voxels, for vectorised lookup of (neighbour) keys."""
+
+    origin: np.ndarray  # (3,) int64: key of linear index 0 (padded by one voxel on each side)
+    dims: np.ndarray  # (3,) int64: padded extent, so key +- 1 never wraps
+    sorted_lin: np.ndarray  # (M,) int64 ascending
+    order: np.ndarray  # (M,) int64: voxel index of each sorted entry
+
+    @classmethod
+    def build(cls, keys: np.ndarray) -> KeyIndex:
+        """Index (M, 3) int64 keys."""
+        if len(keys) == 0:
+            z = np.zeros(3, np.int64)
+            return cls(z, np.ones(3, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+        origin = keys.min(axis=0) - 1
+        dims = keys.max(axis=0) - origin + 2
+        if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+            raise InputError("voxel grid too large to index (extent / voxel size overflows)")
+        lin = cls._linear(keys, origin, dims)
+        order = np.argsort(lin, kind="stable")
+        return cls(origin, dims, lin[order], order)
+
+    @staticmethod
+    def _linear(keys: np.ndarray, origin: np.ndarray, dims: np.ndarray) -> np.ndarray:
+        k = keys - origin
+        return (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        """Voxel index of each (Q, 3) key, -1 where absent."""
+        if len(self.sorted_lin) == 0 or len(keys) == 0:
+            return np.full(len(keys), -1, np.int64)
+        k = keys - self.origin
+        inside = np.all((k >= 0) & (k < self.dims), axis=1)
+        lin = (k[:, 0] * self.dims[1] + k[:, 1]) * self.dims[2] + k[:, 2]
+        pos = np.searchsorted(self.sorted_lin, lin)
+        pos = np.minimum(pos, len(self.sorted_lin) - 1)
+        hit = inside & (self.sorted_lin[pos] == lin)
+        return np.where(hit, self.order[pos], -1)
+
+    def neighbour_pairs(
+        self, keys: np.ndarray, offsets: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs (i, j) of indexed voxels with keys[j] == keys[i] + offset for any offset.
+
+        keys: (M, 3) keys of the indexed voxels (same order as given to ``build``).
+        offsets: (K, 3) int64. Returns two (E,) int64 arrays.
+        """
+        src, dst = [], []
+        for off in np.asarray(offsets, dtype=np.int64):  # loop over <= 13 offsets, not voxels
+            j = self.find(keys + off)
+            ok = np.flatnonzero(j >= 0)
+            src.append(ok)
+            dst.append(j[ok])
+        if not src:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return np.concatenate(src), np.concatenate(dst)
+
+
+@dataclass
+class VoxelGrid:
+    """Points grouped into voxels, with per-voxel moments.
+
+    keys: (M, 3) int64 voxel coordinates, in ascending linear-key order.
+    counts: (M,) int64 points per voxel.
+    point_voxel: (N,) int64 voxel index of each input point.
+    sums: (M, 3) float64 sum of (p - corner) over the voxel's points, metres.
+    outer: (M, 6) float64 sum of products of (p - corner), entries in ``OUTER_INDEX`` order.
+    """
+
+    size: np.ndarray
+    keys: np.ndarray
+    counts: np.ndarray
+    point_voxel: np.ndarray
+    sums: np.ndarray
+    outer: np.ndarray
+
+    @property
+    def corners(self) -> np.ndarray:
+        """(M, 3) float64 minimum corner of each voxel, metres."""
+        return self.keys * self.size
+
+    def means(self) -> np.ndarray:
+        """(M, 3) float64 centroid of each voxel's points, metres."""
+        return self.corners + self.sums / self.counts[:, None]
+
+    def covariances(self) -> np.ndarray:
+        """(M, 3, 3) float64 population covariance of each voxel's points, m^2."""
+        c = self.counts[:, None].astype(np.float64)
+        mean = self.sums / c
+        second = self.outer / c
+        cov = np.empty((len(c), 3, 3))
+        for col, (a, b) in enumerate(OUTER_INDEX):
+            v = second[:, col] - mean[:, a] * mean[:, b]
+            cov[:, a, b] = v
+            cov[:, b, a] = v
+        return cov
+
+
+def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) -> VoxelGrid:
+    """Group (N, 3) points into voxels of ``size`` (3,) metres and accumulate moments."""
+    pts = np.asarray(points, dtype=np.float64)
+    size = np.asarray(size, dtype=np.float64).reshape(3)
+    n = len(pts)
+    keys = voxel_keys(pts, size)
+    if n == 0:
+        z = np.zeros((0, 3))
+        return VoxelGrid(
+            size, keys, np.zeros(0, np.int64), np.zeros(0, np.int64), z, np.zeros((0, 6))
+        )
+    origin = keys.min(axis=0)
+    dims = keys.max(axis=0) - origin + 1
+    if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+        raise InputError("voxel grid too large to index (extent / voxel size overflows)")
+    k = keys - origin
+    lin = (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+    # Sorting is the one O(N log N) step; everything after it is contiguous reductions.
+    order = np.argsort(lin.astype(np.int32) if dims.prod() < 2**31 else lin, kind="stable")
+    lin_sorted = lin[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    np.not_equal(lin_sorted[1:], lin_sorted[:-1], out=new[1:])
+    starts = np.flatnonzero(new)
+    counts = np.diff(np.append(starts, n))
+    voxel_of_sorted = np.cumsum(new) - 1
+    point_voxel = np.empty(n, dtype=np.int64)
+    point_voxel[order] = voxel_of_sorted
+    vkeys = keys[order[starts]]
+    local = pts[order] - keys[order] * size
+    sums = np.add.reduceat(local, starts, axis=0)
+    prods = np.empty((n, 6))
+    for col, (a, b) in enumerate(OUTER_INDEX):
+        np.multiply(local[:, a], local[:, b], out=prods[:, col])
+    outer = np.add.reduceat(prods, starts, axis=0)
+    return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer)
+
+
+def horizontal_offsets(connectivity: int) -> np.ndarray:
+    """Forward (half) neighbour offsets within one height layer: (K, 3) int64."""
+    if connectivity == 4:
+        return np.array([[1, 0, 0], [0, 1, 0]], dtype=np.int64)
+    if connectivity == 8:
+        return np.array([[1, 0, 0], [0, 1, 0], [1, 1, 0], [1, -1, 0]], dtype=np.int64)
+    raise InputError(f"connectivity must be 4 or 8, got {connectivity}")
+
+
+def layered_offsets(connectivity: int) -> np.ndarray:
+    """Forward (half) neighbour offsets in xy (4 or 8) across layers dz in {-1, 0, 1}, plus the
+    voxel directly above: (K, 3) int64. Together with their negations they cover every neighbour."""
+    planar = horizontal_offsets(connectivity)
+    out = [planar + [0, 0, dz] for dz in (-1, 0, 1)]
+    out.append(np.array([[0, 0, 1]], dtype=np.int64))
+    return np.concatenate(out)

@@ -1,0 +1,86 @@
+"""Writing a detection to a folder: the report's clouds, result.json, labels.npz, one PLY per
+object. The files a user opens after `supportnode detect`."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from supportnode.errors import CloudFormatError
+from supportnode.io.clouds import Cloud, write_ply
+from supportnode.pipeline import Detection
+
+RED = np.array([255, 0, 0], dtype=np.uint8)
+GREEN = np.array([0, 255, 0], dtype=np.uint8)
+
+
+def per_input_row(labels: np.ndarray, cloud: Cloud) -> np.ndarray:
+    """Spread (N,) labels of the kept points over the file's rows: (input_count,) int32, -1 on
+    rows dropped for NaN/Inf, so labels line up with the input file row by row."""
+    out = np.full(cloud.input_count, -1, dtype=np.int32)
+    out[cloud.source_index] = labels
+    return out
+
+
+def write_detection(
+    out_dir: str | os.PathLike,
+    name: str,
+    cloud: Cloud,
+    points: np.ndarray,
+    detection: Detection,
+    params_dict: dict,
+    extra: dict | None = None,
+) -> list[Path]:
+    """Write every output of one detection; returns the paths written.
+
+    points: (N, 3) float64 in the detection frame (aligned when gravity alignment ran)."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise CloudFormatError(f"{out}: cannot create output folder: {err.strerror}") from err
+    written: list[Path] = []
+    on = detection.surfaces.labels >= 0
+    for suffix, mask, colour in (("detected", on, RED), ("not_detected", ~on, GREEN)):
+        path = out / f"{name}_{suffix}.ply"
+        sel = points[mask]
+        write_ply(path, sel, colors=np.broadcast_to(colour, (len(sel), 3)).copy())
+        written.append(path)
+
+    arrays = {"surface": per_input_row(detection.surfaces.labels, cloud)}
+    if detection.objects is not None:
+        arrays["object"] = per_input_row(detection.objects.labels, cloud)
+        obj_dir = out / f"{name}_objects"
+        obj_dir.mkdir(exist_ok=True)
+        for stale in obj_dir.glob("*.ply"):  # a rerun with fewer objects leaves none behind
+            stale.unlink()
+        labels = detection.objects.labels
+        order = np.argsort(labels, kind="stable")
+        bounds = np.searchsorted(labels[order], np.arange(len(detection.objects.clusters) + 1))
+        for cid in range(len(detection.objects.clusters)):  # one file per object
+            idx = order[bounds[cid] : bounds[cid + 1]]
+            path = obj_dir / f"{cid:03d}.ply"
+            write_ply(path, points[idx])
+            written.append(path)
+    labels_path = out / "labels.npz"
+    np.savez_compressed(labels_path, **arrays)
+    written.append(labels_path)
+
+    result = {
+        "input": {
+            "path": str(cloud.path),
+            "rows": int(cloud.input_count),
+            "points": len(points),
+            "dropped_nonfinite": int(cloud.dropped_nonfinite),
+        },
+        "params": params_dict,
+        **(extra or {}),
+        **detection.to_dict(),
+    }
+    result_path = out / "result.json"
+    result_path.write_text(json.dumps(result, indent=1) + "\n")
+    written.append(result_path)
+    return written

@@ -1,0 +1,101 @@
+"""One cloud in; support surfaces, the objects on them and their free space out.
+
+The single entry used by `supportnode detect` and by the node. Pure: arrays and parameters in,
+dataclasses out, no files or printing.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from supportnode.geometry.freespace import FreeSpace, free_space_all
+from supportnode.geometry.objects import ObjectResult, detect_objects
+from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
+from supportnode.params import DetectParams
+
+
+@dataclass
+class Detection:
+    """Everything found in one cloud. Coordinates are in the detection frame: the input frame,
+    or the gravity-aligned frame ``rotation @ p`` when alignment ran."""
+
+    surfaces: SurfaceResult
+    objects: ObjectResult | None
+    free_space: list[FreeSpace]
+    timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
+    rotation: np.ndarray | None = None  # (3, 3) applied to the input, None when not aligned
+    gravity: object | None = None  # GravityEstimate when alignment ran
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (no per-point arrays)."""
+        out: dict = {
+            "timings": {k: round(v, 6) for k, v in self.timings.items()},
+            "surfaces": [s.to_dict() for s in self.surfaces.surfaces],
+            "objects": [c.to_dict() for c in self.objects.clusters] if self.objects else [],
+            "free_space": [f.to_dict() for f in self.free_space],
+            "stats": {"surfaces": self.surfaces.stats, "objects": self.objects.stats}
+            if self.objects
+            else {"surfaces": self.surfaces.stats},
+        }
+        if self.rotation is not None:
+            out["gravity"] = {
+                "rotation": np.round(self.rotation, 9).tolist(),
+                **_gravity_summary(self.gravity),
+            }
+        return out
+
+
+def _gravity_summary(g: object | None) -> dict:
+    if g is None:
+        return {}
+    return {
+        "up_in_input_frame": [float(v) for v in g.up],
+        "tilt_deg": float(g.tilt_deg),
+        "inliers": int(g.inliers),
+        "residual_deg": float(g.residual_deg),
+    }
+
+
+def detect(
+    points: np.ndarray,
+    params: DetectParams | None = None,
+    *,
+    align: bool = False,
+    objects: bool = True,
+    sensor_origin: np.ndarray | None = None,
+) -> Detection:
+    """Run the detection stages on (N, 3) float points, metres.
+
+    align: estimate the rotation to gravity from normals first (no IMU); raises
+    AlignmentError when the cloud shows no horizontal surface. objects: also segment the
+    supported objects and compute free space.
+    """
+    params = params or DetectParams()
+    timings: dict[str, float] = {}
+    pts = np.asarray(points, dtype=np.float64)
+    rotation = None
+    gravity = None
+    if align:
+        from supportnode.geometry.gravity import estimate_gravity
+
+        t = time.perf_counter()
+        gravity = estimate_gravity(pts, params.gravity, sensor_origin=sensor_origin)
+        rotation = gravity.rotation
+        pts = pts @ rotation.T
+        timings["gravity"] = time.perf_counter() - t
+    t = time.perf_counter()
+    surfaces = detect_surfaces(pts, params.surfaces)
+    timings["surfaces"] = time.perf_counter() - t
+    object_result = None
+    free: list[FreeSpace] = []
+    if objects:
+        t = time.perf_counter()
+        object_result = detect_objects(pts, surfaces, params.objects)
+        timings["objects"] = time.perf_counter() - t
+        t = time.perf_counter()
+        free = free_space_all(surfaces, object_result, pts, params.freespace)
+        timings["free_space"] = time.perf_counter() - t
+    return Detection(surfaces, object_result, free, timings, rotation, gravity)

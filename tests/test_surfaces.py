@@ -1,0 +1,195 @@
+"""Support surfaces on clouds built in the test: heights, areas, what must not be a surface."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import box_points, plane_points
+
+from supportnode.errors import InputError
+from supportnode.geometry.surfaces import cells_outline, detect_surfaces
+from supportnode.params import SurfaceParams
+
+
+def _by_height(result, z, tol=0.01):
+    return [s for s in result.surfaces if abs(s.height - z) < tol]
+
+
+def test_floor_and_table_found_with_height_and_area(room):
+    pts, truth = room
+    res = detect_surfaces(pts)
+    assert len(res.surfaces) == 2
+    floor, table = res.surfaces  # largest first
+    assert floor.height == pytest.approx(0.0, abs=1e-6)
+    assert table.height == pytest.approx(0.73, abs=1e-6)
+    assert floor.area == pytest.approx(4.04 * 4.07, rel=0.03)
+    assert table.area == pytest.approx(1.0 * 0.7, rel=0.05)
+    assert table.normal[2] == pytest.approx(1.0, abs=1e-6)
+    assert [floor.id, table.id] == [0, 1]
+    # Point labels: precise (nothing from walls, legs or the box) and nearly complete.
+    on = res.labels >= 0
+    assert not on[truth == 3].any()  # wall
+    # Only the rim of the box and the leg tops within the 1 cm point tolerance of the table.
+    assert on[truth == 2].mean() < 0.05 and on[truth == 4].mean() < 0.01
+    assert np.isin(truth[on], [0, 1]).mean() > 0.995  # precision
+    assert on[truth == 1].mean() > 0.97
+    assert on[truth == 0].mean() > 0.97
+    assert (res.labels == table.id).sum() == table.point_count
+
+
+def test_wall_legs_and_object_top_are_not_surfaces(room):
+    pts, _ = room
+    res = detect_surfaces(pts)
+    heights = sorted(round(s.height, 2) for s in res.surfaces)
+    assert heights == [0.0, 0.73]  # no 0.93 box top, no wall rings, no leg tops
+
+
+def test_seed_method_reproduces_the_report_false_positives(room):
+    """Algorithm 1 as published has no flatness test: wall voxels of one layer grow into
+    'surfaces'. This is the report's known error that the planar default removes."""
+    pts, _ = room
+    res = detect_surfaces(pts, SurfaceParams(method="seed", psi_min=10))
+    assert len(_by_height(res, 0.0, 0.03)) >= 1
+    assert len([s for s in _by_height(res, 0.73, 0.03) if s.normal[2] > 0.9]) == 1
+    wall_like = [s for s in res.surfaces if abs(s.normal[2]) < 0.5]
+    assert len(wall_like) >= 3
+
+
+def test_seed_psi_min_and_p_min(rng):
+    pts = plane_points(rng, 0, 0.5, 0, 0.5, 1.0, 5000)  # 25 voxels of 0.1 m
+    assert len(detect_surfaces(pts, SurfaceParams(method="seed", psi_min=25)).surfaces) == 1
+    assert len(detect_surfaces(pts, SurfaceParams(method="seed", psi_min=37)).surfaces) == 0
+    assert len(detect_surfaces(pts, SurfaceParams(method="seed", p_min=1000)).surfaces) == 0
+
+
+def test_seed_connectivity_4_vs_8(rng):
+    # Two squares touching only at a corner: one region with 8-neighbours, two with 4.
+    a = plane_points(rng, 0.0, 0.3, 0.0, 0.3, 0.5, 3000)
+    b = plane_points(rng, 0.3, 0.6, 0.3, 0.6, 0.5, 3000)
+    pts = np.vstack([a, b]) + [0.001, 0.001, 0.0]
+    r8 = detect_surfaces(pts, SurfaceParams(method="seed", psi_min=5, connectivity=8))
+    r4 = detect_surfaces(pts, SurfaceParams(method="seed", psi_min=5, connectivity=4))
+    assert len(r8.surfaces) == 1 and len(r4.surfaces) == 2
+
+
+def test_table_with_dip_is_one_surface(rng):
+    """The report's table with a 2 cm dip in its middle gave false negatives; growing across
+    height layers within max_step keeps it one surface."""
+    frame = plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 20000)
+    inner = (np.abs(frame[:, 0] - 0.6) < 0.3) & (np.abs(frame[:, 1] - 0.4) < 0.2)
+    frame[inner, 2] -= 0.02
+    res = detect_surfaces(frame)
+    assert len(res.surfaces) == 1
+    assert (res.labels >= 0).mean() > 0.97
+
+
+def test_slightly_sloped_table_is_a_surface_and_a_ramp_is_not(rng):
+    def tilted(deg, n):
+        p = plane_points(rng, 0, 1.0, 0, 1.0, 0.0, n)
+        p[:, 2] = 0.7 + np.tan(np.radians(deg)) * p[:, 0]
+        return p
+
+    assert len(detect_surfaces(tilted(3, 20000)).surfaces) == 1
+    assert len(detect_surfaces(tilted(15, 20000)).surfaces) == 0
+    assert len(detect_surfaces(tilted(15, 20000), SurfaceParams(max_tilt_deg=20)).surfaces) == 1
+
+
+def test_thin_rail_is_rejected_by_min_width(rng):
+    rail = plane_points(rng, 0, 3.0, 0, 0.06, 0.9, 6000)  # 3 m long wall top, 6 cm wide
+    seat = plane_points(rng, 5, 5.45, 0, 0.45, 0.45, 6000)
+    res = detect_surfaces(np.vstack([rail, seat]))
+    assert [round(s.height, 2) for s in res.surfaces] == [0.45]
+    loose = detect_surfaces(np.vstack([rail, seat]), SurfaceParams(min_width=0.0))
+    assert len(loose.surfaces) == 2
+
+
+def test_min_area_in_square_metres(rng):
+    small = plane_points(rng, 0, 0.25, 0, 0.25, 0.4, 3000)
+    assert len(detect_surfaces(small, SurfaceParams(min_area=0.05)).surfaces) == 1
+    assert len(detect_surfaces(small, SurfaceParams(min_area=0.1)).surfaces) == 0
+
+
+def test_stacked_shelf_boards_are_separate(rng):
+    boards = [plane_points(rng, 0, 0.8, 0, 0.35, z, 6000) for z in (0.3, 0.6, 0.9)]
+    res = detect_surfaces(np.vstack(boards))
+    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.3, 0.6, 0.9]
+
+
+def test_invariant_to_point_order(room):
+    pts, _ = room
+    perm = np.random.default_rng(7).permutation(len(pts))
+    a = detect_surfaces(pts)
+    b = detect_surfaces(pts[perm])
+    assert np.array_equal(a.labels[perm], b.labels)
+    assert [s.to_dict() for s in a.surfaces] == [s.to_dict() for s in b.surfaces]
+
+
+@pytest.mark.parametrize("shift", [(0.037, -0.013), (10.5, 3.25), (-101.01, 55.555)])
+def test_invariant_to_horizontal_translation(room, shift):
+    pts, _ = room
+    a = detect_surfaces(pts)
+    b = detect_surfaces(pts + [shift[0], shift[1], 0.0])
+    assert len(a.surfaces) == len(b.surfaces)
+    for sa, sb in zip(a.surfaces, b.surfaces, strict=True):
+        assert sb.height == pytest.approx(sa.height, abs=1e-6)
+        assert sb.area == pytest.approx(sa.area, rel=0.05)
+        assert sb.centroid[:2] == pytest.approx(sa.centroid[:2] + shift, abs=0.03)
+    agree = (a.labels >= 0) == (b.labels >= 0)
+    assert agree.mean() > 0.98
+
+
+def test_outline_of_table_and_hole():
+    # 5x5 cells with the middle cell missing: one CCW outer ring and one CW hole.
+    cells = np.array([(i, j) for i in range(5) for j in range(5) if (i, j) != (2, 2)])
+    rings = cells_outline(cells, (0.1, 0.1))
+    assert len(rings) == 2
+    outer, hole = rings
+    assert sorted(map(tuple, np.round(outer, 6))) == [(0, 0), (0, 0.5), (0.5, 0), (0.5, 0.5)]
+
+    def area(r):
+        x, y = r[:, 0], r[:, 1]
+        return 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+    assert area(outer) == pytest.approx(0.25)
+    assert area(hole) == pytest.approx(-0.01)
+
+
+def test_surface_to_dict_is_json_ready(room):
+    import json
+
+    res = detect_surfaces(room[0])
+    d = json.loads(json.dumps(res.surfaces[1].to_dict()))
+    for key in (
+        "id",
+        "height",
+        "area",
+        "centroid",
+        "normal",
+        "flatness",
+        "bbox_min",
+        "bbox_max",
+        "outline",
+        "point_count",
+        "voxel_count",
+    ):
+        assert key in d
+
+
+@pytest.mark.parametrize(
+    "bad", [np.zeros((10, 2)), np.array([[0.0, 0.0, np.nan]]), np.zeros((3, 3, 3))]
+)
+def test_bad_points_raise_input_error(bad):
+    with pytest.raises(InputError):
+        detect_surfaces(bad)
+
+
+def test_empty_cloud_gives_no_surfaces():
+    res = detect_surfaces(np.zeros((0, 3)))
+    assert res.surfaces == [] and res.labels.shape == (0,)
+
+
+def test_box_on_floor_top_not_surface_but_floor_is(rng):
+    floor = plane_points(rng, 0, 2, 0, 2, 0.0, 30000)
+    box = box_points(rng, (1.0, 1.0, 0.15), (0.2, 0.2, 0.3), 4000)
+    res = detect_surfaces(np.vstack([floor, box]))
+    assert [round(s.height, 3) for s in res.surfaces] == [0.0]
