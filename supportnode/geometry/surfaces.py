@@ -19,8 +19,10 @@ from scipy.sparse.csgraph import connected_components
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
 from supportnode.geometry.voxels import (
+    OUTER_INDEX,
     KeyIndex,
     VoxelGrid,
+    argsort_keys,
     horizontal_offsets,
     layered_offsets,
     voxelize,
@@ -344,31 +346,47 @@ def _summarise(
     on = np.flatnonzero(comp_labels >= 0)
     if len(on) == 0:
         return [], np.full(len(pts), -1, dtype=np.int64)
-    comps, compact = np.unique(comp_labels[on], return_inverse=True)
+    present = np.bincount(comp_labels[on])
+    comps = np.flatnonzero(present)
     s_count = len(comps)
-    p = pts[on]
-    order = np.argsort(compact, kind="stable")
+    remap = np.full(len(present), -1, dtype=np.int64)
+    remap[comps] = np.arange(s_count)
+    compact = remap[comp_labels[on]]
+    # Sort the surface points by (surface, voxel): both groupings become contiguous runs.
+    n_vox = len(grid.counts)
+    key = compact * n_vox + grid.point_voxel[on]
+    order = argsort_keys(key)
+    key = key[order]
+    ps = pts[on[order]]
     g = compact[order]
-    ps = p[order]
     starts = np.searchsorted(g, np.arange(s_count))
     counts = np.diff(np.append(starts, len(g)))
     centroid = np.add.reduceat(ps, starts, axis=0) / counts[:, None]
-    d = ps - centroid[g]
-    cov = np.einsum("ni,nj->nij", d, d).reshape(len(d), 9)
-    cov = (np.add.reduceat(cov, starts, axis=0) / counts[:, None]).reshape(s_count, 3, 3)
+    d = ps - np.repeat(centroid, counts, axis=0)
+    prods = np.stack([d[:, a] * d[:, b] for a, b in OUTER_INDEX], axis=1)
+    second = np.add.reduceat(prods, starts, axis=0) / counts[:, None]
+    cov = np.empty((s_count, 3, 3))
+    for col, (a, b) in enumerate(OUTER_INDEX):
+        cov[:, a, b] = cov[:, b, a] = second[:, col]
     evals, normal = sym3_eigen(cov)
     normal = np.where(normal[:, 2:3] < 0, -normal, normal)
     flatness = np.sqrt(np.maximum(evals[:, 0], 0.0))
     bmin = np.minimum.reduceat(ps, starts, axis=0)
     bmax = np.maximum.reduceat(ps, starts, axis=0)
-    height = _median_by_group(ps[:, 2], g, s_count)
-    vcount = np.bincount(
-        np.searchsorted(comps, surface_of_voxel[surface_of_voxel >= 0]), minlength=s_count
-    )
+    bounds = np.append(starts, len(g))
+    height = np.array([np.median(ps[bounds[i] : bounds[i + 1], 2]) for i in range(s_count)])
+    vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
 
+    # Per (surface, voxel) runs -> footprint cells with the extent of their points.
+    run = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    run_xy_min = np.minimum.reduceat(ps[:, :2], run, axis=0)
+    run_xy_max = np.maximum.reduceat(ps[:, :2], run, axis=0)
+    run_n = np.diff(np.append(run, len(key)))
+    run_cells = grid.keys[key[run] % n_vox, :2]
     vx, vy = float(params.voxel_size[0]), float(params.voxel_size[1])
-    cell_keys = np.floor(ps[:, :2] / (vx, vy)).astype(np.int64)
-    area, cells_of = _footprint_areas(ps[:, :2], cell_keys, g, s_count, (vx, vy))
+    area, cells_of = _footprint_areas(
+        run_cells, g[run], run_xy_min, run_xy_max, run_n, s_count, (vx, vy)
+    )
 
     rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
     new_id = np.empty(s_count, dtype=np.int64)
@@ -400,29 +418,32 @@ def _summarise(
 
 
 def _footprint_areas(
-    xy: np.ndarray,
-    cell_keys: np.ndarray,
+    cells: np.ndarray,
     group: np.ndarray,
+    xy_min: np.ndarray,
+    xy_max: np.ndarray,
+    n: np.ndarray,
     n_groups: int,
     cell_size: tuple[float, float],
 ) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Area of each group's footprint and its (C, 2) cells.
+    """Area of each group's footprint and its (C, 2) cells, from per-voxel runs of points.
 
-    Interior cells count whole; a border cell counts the part its points span (plus the mean
-    point spacing), so a table edge that cuts a cell is not rounded up to the cell."""
+    Interior cells count whole; a border cell counts the part its points span, so a table
+    edge that cuts a cell is not rounded up to the whole cell."""
     vx, vy = cell_size
-    lo = cell_keys.min(axis=0) - 1
-    ck = cell_keys - lo
+    lo = cells.min(axis=0) - 1
+    ck = cells - lo
     span = int(ck[:, 1].max()) + 2
     ncell = (int(ck[:, 0].max()) + 2) * span
     pair = group.astype(np.int64) * ncell + ck[:, 0] * span + ck[:, 1]
-    order = np.argsort(pair, kind="stable")
+    order = np.argsort(pair, kind="stable")  # runs, not points: small
     ps = pair[order]
     first = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]])
     upair = ps[first]
-    n_in = np.diff(np.append(first, len(ps)))
-    sxy = xy[order]
-    ext = np.maximum.reduceat(sxy, first, axis=0) - np.minimum.reduceat(sxy, first, axis=0)
+    n_in = np.add.reduceat(n[order], first)
+    ext = np.maximum.reduceat(xy_max[order], first, axis=0) - np.minimum.reduceat(
+        xy_min[order], first, axis=0
+    )
     # n uniform samples span (n-1)/(n+1) of an interval on average: undo that shrinkage.
     stretch = (n_in + 1) / np.maximum(n_in - 1, 1)
     frac = np.clip(ext[:, 0] * stretch / vx, 0, 1) * np.clip(ext[:, 1] * stretch / vy, 0, 1)
@@ -437,9 +458,9 @@ def _footprint_areas(
     ug = upair // ncell
     area = np.bincount(ug, weights=frac, minlength=n_groups) * vx * vy
     local = upair % ncell
-    cells = np.stack([local // span, local % span], axis=1) + lo
+    out_cells = np.stack([local // span, local % span], axis=1) + lo
     bounds = np.searchsorted(ug, np.arange(n_groups + 1))
-    return area, [cells[bounds[i] : bounds[i + 1]] for i in range(n_groups)]
+    return area, [out_cells[bounds[i] : bounds[i + 1]] for i in range(n_groups)]
 
 
 def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.ndarray]:
