@@ -91,7 +91,7 @@ class ObjectResult:
 
 
 def detect_objects(
-    points: np.ndarray, surfaces: SurfaceResult, params: ObjectParams = ObjectParams()
+    points: np.ndarray, surfaces: SurfaceResult, params: ObjectParams | None = None
 ) -> ObjectResult:
     """Cluster the points that lie on no surface into objects.
 
@@ -101,25 +101,25 @@ def detect_objects(
     on point order) and (N,) int32 labels, -1 for surface points, noise and unlabelled points.
     Raises InputError on a wrong shape, non-finite values or a label array of the wrong length.
     """
+    params = params or ObjectParams()
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise InputError(f"points must have shape (N, 3), got {pts.shape}")
     surf_labels = np.asarray(surfaces.labels)
     if surf_labels.shape != (len(pts),):
-        raise InputError(
-            f"surface labels have shape {surf_labels.shape}, expected ({len(pts)},)"
-        )
+        raise InputError(f"surface labels have shape {surf_labels.shape}, expected ({len(pts)},)")
     if not np.isfinite(pts).all():
         raise InputError("points contain NaN or infinite values")
 
     t0 = time.perf_counter()
     cand = np.flatnonzero(surf_labels == -1)
     cp = pts[cand]
-    stats: dict = {"method": params.method, "candidates": int(len(cand))}
+    stats: dict = {"method": params.method, "candidates": len(cand)}
     if params.method == "knn":
         lab = _cluster_knn(cp, params, stats)
     elif params.method == "voxel":
-        lab = _cluster_voxel(cp, params.voxel_size, stats)
+        support = _support_below(cp, surfaces.surfaces, params.support_tolerance)
+        lab = _cluster_voxel(cp, params.voxel_size, stats, support)
     else:
         raise InputError(f"unknown object method {params.method!r}; expected 'knn' or 'voxel'")
     lab = _drop_small(lab, params.min_points)
@@ -149,7 +149,7 @@ def detect_objects(
 def _cluster_knn(cp: np.ndarray, params: ObjectParams, stats: dict) -> np.ndarray:
     """The report's Algorithm 2 on candidates cp (M, 3); returns (M,) int64 labels, -1 = none."""
     m = len(cp)
-    n_s = min(m, max(1, int(round(params.sample_fraction * m)))) if m else 0
+    n_s = min(m, max(1, round(params.sample_fraction * m))) if m else 0
     stats["sampled"] = n_s
     if n_s == 0:
         return np.full(m, -1, dtype=np.int64)
@@ -190,8 +190,31 @@ _FORWARD = np.array(
 )
 
 
-def _cluster_voxel(cp: np.ndarray, voxel_size: float, stats: dict) -> np.ndarray:
-    """26-connected occupied voxels; cp (M, 3) metres -> (M,) int64 component per point."""
+def _support_below(cp: np.ndarray, surfaces: list[Surface], tol: float) -> np.ndarray:
+    """(M,) int64: the highest surface under each point of cp (M, 3), -1 when none.
+
+    A point is over a surface when its x, y falls on the surface's (filled) footprint and it is
+    no more than ``tol`` below the surface's height.
+    """
+    sup = np.full(len(cp), -1, dtype=np.int64)
+    for s in sorted(surfaces, key=lambda s: s.height):  # higher surfaces overwrite lower ones
+        # Undilated: a chair back rising just beside a table must not be cut at table height.
+        lk = _SupportLookup(s, dilate=False)
+        above = cp[:, 2] >= lk.height - tol
+        idx = np.flatnonzero(above)
+        sup[idx[lk.over(cp[idx, :2])]] = lk.id
+    return sup
+
+
+def _cluster_voxel(
+    cp: np.ndarray, voxel_size: float, stats: dict, support: np.ndarray | None = None
+) -> np.ndarray:
+    """26-connected occupied voxels; cp (M, 3) metres -> (M,) int64 component per point.
+
+    support: optional (M,) surface under each point; voxels over different surfaces are not
+    linked, so objects on a shelf board do not join the shelf's frame (over the floor) or the
+    objects on the board below through it.
+    """
     m = len(cp)
     stats["sampled"] = m
     if m == 0:
@@ -214,6 +237,13 @@ def _cluster_voxel(cp: np.ndarray, voxel_size: float, stats: dict) -> np.ndarray
         cols.append(pos[hit])
     r = np.concatenate(rows)
     c = np.concatenate(cols)
+    if support is not None:
+        # The highest support among a voxel's points: independent of point order.
+        vsup = np.full(nv, -1, dtype=np.int64)
+        np.maximum.at(vsup, inv.ravel(), support)
+        same = vsup[r] == vsup[c]
+        stats["support_cuts"] = int((~same).sum())
+        r, c = r[same], c[same]
     graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(nv, nv))
     _, comp = connected_components(graph.tocsr(), directed=False)
     return comp[inv.ravel()].astype(np.int64)
@@ -309,11 +339,14 @@ def _split_footprint(
     depth = ndimage.distance_transform_edt(occ) - 0.5  # cell centre to footprint edge, cells
     depth[~occ] = 0.0
     top = float(depth.max())
-    for t in np.arange(0.5, top, 0.5):  # ascending: the shallowest neck is cut first
+    # Ascending levels, the shallowest neck is cut first; at most ~40 levels for big footprints.
+    for t in np.arange(0.5, top, max(0.5, top / 40.0)):
         comp, n = ndimage.label(depth > t, structure=eight)
         if n < 2:
             continue
-        peak = np.asarray(ndimage.maximum(depth, comp, np.arange(1, n + 1)))
+        inside = comp > 0
+        peak = np.zeros(n)
+        np.maximum.at(peak, comp[inside] - 1, depth[inside])
         deep = (t * cell < radius) | (t <= _SPLIT_NECK_RATIO * peak)
         if deep.sum() < 2:
             continue
@@ -394,7 +427,7 @@ def _describe(
 class _SupportLookup:
     """Dense footprint raster of one surface for point-over-surface queries."""
 
-    def __init__(self, surface: Surface) -> None:
+    def __init__(self, surface: Surface, dilate: bool = True) -> None:
         self.id = surface.id
         self.height = float(surface.height)
         self.cell = np.asarray(surface.cell_size, dtype=np.float64)
@@ -411,7 +444,9 @@ class _SupportLookup:
         mask = np.zeros(tuple(rel.max(axis=0) + 2), dtype=bool)
         mask[rel[:, 0], rel[:, 1]] = True
         mask = ndimage.binary_fill_holes(mask)
-        self.mask = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool))
+        if dilate:
+            mask = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool))
+        self.mask = mask
 
     def over(self, xy: np.ndarray) -> np.ndarray:
         """(P,) bool: which x, y points (P, 2) lie over this surface's (filled) footprint."""
@@ -444,11 +479,9 @@ def _support(p: np.ndarray, lookups: list[_SupportLookup], tol: float) -> tuple[
     return (None if best is None else -best[2]), bottom
 
 
-def _make_cluster(
-    cid: int, p: np.ndarray, lookups: list[_SupportLookup], tol: float
-) -> Cluster:
+def _make_cluster(cid: int, p: np.ndarray, lookups: list[_SupportLookup], tol: float) -> Cluster:
     """Properties of one cluster p (P, 3)."""
-    sid, bottom = _support(p, lookups, tol)
+    sid, _ = _support(p, lookups, tol)
     lo, hi = p.min(axis=0), p.max(axis=0)
     base = lookups[[lk.id for lk in lookups].index(sid)].height if sid is not None else lo[2]
 

@@ -1,0 +1,121 @@
+"""Object segmentation at the report's sizes: Algorithm 2 (knn) and the voxel default.
+
+Run: python bench/bench_objects.py [--repeats 5]
+Prints median seconds per method next to the report's times (AMD Ryzen 5 3600, Python 3.8), on
+mesh-sampled simulator clouds whose surfaces come from the planar detector (timed apart), then
+how many ground-truth touching groups each setting separates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import median_time, sampled_scene, table
+
+from supportnode.geometry.objects import detect_objects
+from supportnode.geometry.surfaces import detect_surfaces
+from supportnode.params import ObjectParams, SurfaceParams
+
+# (label, scene, points, report's k, report's time in seconds); s = 0.3 in both.
+CASES = [
+    ("table with 2 chairs", "table_chairs", 108_025, 20, 12.75),
+    ("shelf with 8 items", "shelf", 539_034, 50, 187.00),
+]
+
+
+def timings(repeats: int) -> str:
+    rows = []
+    for label, scene, n, k, report in CASES:
+        pts = sampled_scene(scene, n).points.astype(np.float64)
+        surf = detect_surfaces(pts, SurfaceParams())
+        knn = ObjectParams(method="knn", k=k, sample_fraction=0.3)
+        vox = ObjectParams(method="voxel")
+        vox_nosplit = ObjectParams(method="voxel", split_touching=False)
+        t_knn = median_time(lambda p=knn, x=pts, s=surf: detect_objects(x, s, p), repeats)
+        t_vox = median_time(lambda p=vox, x=pts, s=surf: detect_objects(x, s, p), repeats)
+        t_vns = median_time(lambda p=vox_nosplit, x=pts, s=surf: detect_objects(x, s, p), repeats)
+        cand = int((surf.labels == -1).sum())
+        rows.append([label, n, cand, k, report, t_knn, t_vox, t_vns, f"{report / t_vox:.0f}x"])
+    return table(
+        rows,
+        [
+            "cloud",
+            "points",
+            "candidates",
+            "k",
+            "report s",
+            "knn s",
+            "voxel s",
+            "voxel no-split s",
+            "speed-up",
+        ],
+    )
+
+
+def touching(scene: str, n: int, params: ObjectParams) -> tuple[int, int, list[str]]:
+    """(touching groups, groups separated, names of unseparated groups) on a sampled scene.
+
+    A touching group: ground-truth objects that connected components without splitting put in
+    one cluster. Separated: every object of the group ends in a different cluster (by majority).
+    """
+    cloud = sampled_scene(scene, n)
+    pts = cloud.points.astype(np.float64)
+    surf = detect_surfaces(pts, SurfaceParams())
+    names = sampled_names(scene)
+    base = detect_objects(pts, surf, ObjectParams(method=params.method, split_touching=False))
+    res = detect_objects(pts, surf, params)
+    groups = []
+    obj_ids = [o for o in np.unique(cloud.object) if o >= 0]
+    majority_base = {o: _majority(base.labels[cloud.object == o]) for o in obj_ids}
+    for c in {v for v in majority_base.values() if v >= 0}:
+        members = [o for o, v in majority_base.items() if v == c]
+        if len(members) >= 2:
+            groups.append(members)
+    separated, missed = 0, []
+    for members in groups:
+        got = [_majority(res.labels[cloud.object == o]) for o in members]
+        if len(set(got)) == len(got) and min(got) >= 0:
+            separated += 1
+        else:
+            missed.append("+".join(names.get(int(o), str(o)) for o in members))
+    return len(groups), separated, missed
+
+
+def sampled_names(scene: str) -> dict[int, str]:
+    from supportnode.sim.scene import load_scene
+
+    return dict(enumerate(load_scene(scene).object_names))
+
+
+def _majority(lab: np.ndarray) -> int:
+    lab = lab[lab >= 0]
+    return int(np.bincount(lab).argmax()) if len(lab) else -1
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    print(timings(args.repeats))
+    print()
+    rows = []
+    for scene, n in (("shelf", 539_034), ("u_table", 300_000)):
+        for label, p in (
+            ("voxel + split", ObjectParams()),
+            ("knn s=1 + split", ObjectParams(method="knn", sample_fraction=1.0, k=20)),
+        ):
+            groups, sep, missed = touching(scene, n, p)
+            rows.append([scene, n, label, groups, sep, ", ".join(missed) or "-"])
+    print(
+        table(rows, ["scene", "points", "setting", "touching groups", "separated", "not separated"])
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,205 @@
+"""Free space: the part of each support surface not under an object, and its largest free disc.
+
+A fine 2-D grid (``FreeSpaceParams.cell_size``) covers the surface's footprint cells (coarse grid
+``Surface.cell_size``). Cells under the objects standing on the surface, dilated by ``margin``,
+are occupied; the rest of the surface is free. The largest free disc (where a robot can put
+something round, or land) is the maximum of the distance transform of the free mask.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from supportnode.geometry.objects import Cluster, ObjectResult
+from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.params import FreeSpaceParams
+
+__all__ = ["FreeSpace", "free_space", "free_space_all"]
+
+
+@dataclass
+class FreeSpace:
+    """Free part of one surface. Lengths in metres, areas in m^2."""
+
+    surface_id: int
+    free_area: float  # surface not under an object footprint dilated by margin
+    occupied_area: float  # surface under the dilated footprints
+    disc_center: np.ndarray  # (2,) x, y of the largest free disc (nan when nothing is free)
+    disc_radius: float  # 0 when nothing is free
+    grid_origin: np.ndarray  # (2,) x, y of the corner of cell (0, 0)
+    cell_size: float
+    free_mask: np.ndarray  # (H, W) bool, row = y index, column = x index
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary, without the mask (that is for pictures and topics)."""
+        centre = [None if np.isnan(v) else float(v) for v in self.disc_center]
+        return {
+            "surface_id": int(self.surface_id),
+            "free_area": float(self.free_area),
+            "occupied_area": float(self.occupied_area),
+            "disc_center": centre,
+            "disc_radius": float(self.disc_radius),
+            "grid_origin": [float(v) for v in self.grid_origin],
+            "cell_size": float(self.cell_size),
+            "grid_shape": [int(v) for v in self.free_mask.shape],
+        }
+
+
+def free_space(
+    surface: Surface,
+    clusters: Sequence[Cluster],
+    object_points: Sequence[np.ndarray] | None,
+    params: FreeSpaceParams | None = None,
+) -> FreeSpace:
+    """Free area and largest free disc of one surface.
+
+    clusters: the objects to keep clear of (those whose ``surface_id`` is not this surface's are
+    ignored). object_points: for each cluster, its points (P_i, 3) or (P_i, 2), metres; their
+    x, y cells are occupied. When None, each cluster's convex footprint polygon is filled instead.
+    The surface's footprint includes the cells under its objects (they hold no surface points).
+    """
+    params = params or FreeSpaceParams()
+    c = float(params.cell_size)
+    vx, vy = (float(v) for v in surface.cell_size)
+    cells = np.asarray(surface.cells, dtype=np.int64).reshape(-1, 2)
+    on_this = [i for i, cl in enumerate(clusters) if cl.surface_id == surface.id]
+
+    # Extent: the footprint cells and the objects on them, plus one blocked cell all round so the
+    # distance transform sees the surface's edge as blocked.
+    lo_parts, hi_parts = [], []
+    if len(cells):
+        lo_parts.append(cells.min(axis=0) * [vx, vy])
+        hi_parts.append((cells.max(axis=0) + 1) * [vx, vy])
+    for i in on_this:
+        fp = np.asarray(clusters[i].footprint, dtype=np.float64).reshape(-1, 2)
+        if len(fp):
+            lo_parts.append(fp.min(axis=0))
+            hi_parts.append(fp.max(axis=0))
+    if not lo_parts:
+        return _empty(surface.id, c)
+    lo = np.min(lo_parts, axis=0)
+    hi = np.max(hi_parts, axis=0)
+    origin = np.floor(lo / c) * c - c
+    w, h = (np.ceil((hi - origin) / c).astype(np.int64) + 1).tolist()
+
+    # Surface: fine cell centres looked up in the coarse footprint (1-D per axis, then an outer
+    # index, so no per-cell loop).
+    xc = origin[0] + (np.arange(w) + 0.5) * c
+    yc = origin[1] + (np.arange(h) + 0.5) * c
+    surf = np.zeros((h, w), dtype=bool)
+    if len(cells):
+        c0 = cells.min(axis=0)
+        coarse = np.zeros(tuple(cells.max(axis=0) - c0 + 1), dtype=bool)
+        coarse[cells[:, 0] - c0[0], cells[:, 1] - c0[1]] = True
+        ix = np.floor(xc / vx).astype(np.int64) - c0[0]
+        iy = np.floor(yc / vy).astype(np.int64) - c0[1]
+        okx = (ix >= 0) & (ix < coarse.shape[0])
+        oky = (iy >= 0) & (iy < coarse.shape[1])
+        sub = coarse[np.ix_(ix[okx], iy[oky])].T  # (rows y, cols x)
+        surf[np.ix_(np.flatnonzero(oky), np.flatnonzero(okx))] = sub
+
+    objects = np.zeros((h, w), dtype=bool)
+    for i in on_this:  # one iteration per object
+        if object_points is not None:
+            xy = np.asarray(object_points[i], dtype=np.float64)[:, :2]
+            col = np.floor((xy[:, 0] - origin[0]) / c).astype(np.int64)
+            row = np.floor((xy[:, 1] - origin[1]) / c).astype(np.int64)
+            objects[row.clip(0, h - 1), col.clip(0, w - 1)] = True
+        else:
+            _fill_convex(objects, np.asarray(clusters[i].footprint, np.float64), origin, c)
+    # The table is under its objects even where it has no points (occluded by them).
+    surf |= objects
+    surf[0, :] = surf[-1, :] = surf[:, 0] = surf[:, -1] = False  # the blocked border
+
+    if objects.any():
+        # Dilation by margin: distance from each cell centre to the nearest object cell centre.
+        occupied = ndimage.distance_transform_edt(~objects) * c <= params.margin + 1e-9
+    else:
+        occupied = objects
+    occupied &= surf
+    free = surf & ~occupied
+
+    if free.any():
+        dist = ndimage.distance_transform_edt(free)  # to the nearest blocked cell centre, cells
+        best = dist.max()
+        rows, cols = np.nonzero(dist == best)
+        # Of the equally good cells (e.g. the 2x2 centre of an even square), the one nearest
+        # their mean: centred, and still a free cell.
+        k = int(np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2))
+        centre = origin + (np.array([cols[k], rows[k]]) + 0.5) * c
+        radius = max(0.0, (float(best) - 0.5) * c)  # to the blocked cell's edge, not its centre
+    else:
+        centre = np.full(2, np.nan)
+        radius = 0.0
+    return FreeSpace(
+        surface_id=int(surface.id),
+        free_area=float(free.sum()) * c * c,
+        occupied_area=float(occupied.sum()) * c * c,
+        disc_center=centre,
+        disc_radius=radius,
+        grid_origin=origin,
+        cell_size=c,
+        free_mask=free,
+    )
+
+
+def free_space_all(
+    surfaces: SurfaceResult,
+    objects: ObjectResult,
+    points: np.ndarray,
+    params: FreeSpaceParams | None = None,
+) -> list[FreeSpace]:
+    """Free space of every surface, in surface order.
+
+    points: (N, 3) float, metres, the cloud that ``objects.labels`` (N,) labels.
+    """
+    params = params or FreeSpaceParams()
+    pts = np.asarray(points)
+    lab = np.asarray(objects.labels)
+    order = np.argsort(lab, kind="stable")
+    bounds = np.searchsorted(lab[order], np.arange(len(objects.clusters) + 1))
+    per_cluster = [pts[order[bounds[i] : bounds[i + 1]]] for i in range(len(objects.clusters))]
+    return [free_space(s, objects.clusters, per_cluster, params) for s in surfaces.surfaces]
+
+
+def _fill_convex(mask: np.ndarray, poly: np.ndarray, origin: np.ndarray, c: float) -> None:
+    """Set the cells of mask (H, W) whose centres lie in the convex CCW polygon poly (K, 2)."""
+    if len(poly) == 0:
+        return
+    h, w = mask.shape
+    c0 = np.floor((poly.min(axis=0) - origin) / c).astype(np.int64).clip(0, [w - 1, h - 1])
+    c1 = np.floor((poly.max(axis=0) - origin) / c).astype(np.int64).clip(0, [w - 1, h - 1])
+    cols = np.arange(c0[0], c1[0] + 1)
+    rows = np.arange(c0[1], c1[1] + 1)
+    if len(poly) < 3:  # a point or a segment: its cells
+        t = np.linspace(0.0, 1.0, 50)[:, None]
+        seg = poly[0] + t * (poly[-1] - poly[0])
+        ij = np.floor((seg - origin) / c).astype(np.int64)
+        mask[ij[:, 1].clip(0, h - 1), ij[:, 0].clip(0, w - 1)] = True
+        return
+    gx, gy = np.meshgrid(origin[0] + (cols + 0.5) * c, origin[1] + (rows + 0.5) * c)
+    inside = np.ones(gx.shape, dtype=bool)
+    for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):  # one pass per hull edge
+        inside &= (b[0] - a[0]) * (gy - a[1]) - (b[1] - a[1]) * (gx - a[0]) >= -1e-12
+    # Cells that contain a vertex count too (a thin object may cover no cell centre).
+    ij = np.floor((poly - origin) / c).astype(np.int64)
+    mask[ij[:, 1].clip(0, h - 1), ij[:, 0].clip(0, w - 1)] = True
+    mask[np.ix_(rows, cols)] |= inside
+
+
+def _empty(surface_id: int, c: float) -> FreeSpace:
+    """A surface with no footprint cells: nothing free."""
+    return FreeSpace(
+        surface_id=int(surface_id),
+        free_area=0.0,
+        occupied_area=0.0,
+        disc_center=np.full(2, np.nan),
+        disc_radius=0.0,
+        grid_origin=np.zeros(2),
+        cell_size=c,
+        free_mask=np.zeros((0, 0), dtype=bool),
+    )

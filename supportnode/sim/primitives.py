@@ -1,0 +1,270 @@
+"""Geometric primitives in their own frame: ray intersection and area sampling, vectorised.
+
+Frames follow URDF/SDF: every shape is centred on its origin. A box spans +-size/2; a cylinder has
+its axis along z and spans z in [-height/2, height/2]; a cone has its base disc (radius) at
+z = -height/2 and its apex at z = +height/2; a sphere is centred. The "top" face is the face whose
+outward normal is +z in the shape's frame (box +z face, cylinder top disc); only that face of a
+`surface` primitive is a support surface.
+
+Rays: origins `o` and unit directions `d`, both (N, 3) float64 in the shape frame. Intersections
+return `t` (N,) float64 metres along the ray (inf for a miss; hits closer than EPS are ignored so a
+ray leaving a surface does not hit it again) and `top` (N,) bool (the hit is on the top face).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+EPS = 1e-9
+KINDS = ("box", "cylinder", "sphere", "cone")
+
+# A face sampler draws n points uniformly by area: (rng, n) -> (n, 3) float64 in the shape frame.
+Sampler = Callable[[np.random.Generator, int], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Face:
+    """One face of a shape: its area (m^2), whether it is the top face, and a sampler."""
+
+    area: float
+    top: bool
+    sample: Sampler
+
+
+def _quiet(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Silence numpy warnings: misses and rays parallel to a face legitimately produce inf/NaN,
+    which the intersection code turns into misses."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def _nearest_positive(*ts: np.ndarray) -> np.ndarray:
+    """Per ray, the smallest candidate t > EPS (inf if none). Each ts[i] is (N,) float64."""
+    stack = np.stack(ts)
+    stack[~(stack > EPS)] = np.inf  # also turns NaN (degenerate rays) into misses
+    return stack.min(axis=0)
+
+
+def _disc_hit(o: np.ndarray, d: np.ndarray, z: float, radius: float) -> np.ndarray:
+    """t where rays cross the plane z inside a disc of `radius` about the z axis (else inf)."""
+    t = (z - o[:, 2]) / d[:, 2]
+    x = o[:, 0] + t * d[:, 0]
+    y = o[:, 1] + t * d[:, 1]
+    return np.where(x * x + y * y <= radius * radius, t, np.inf)
+
+
+def _quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Both real roots of a t^2 + 2 b t + c = 0 (NaN where none). `a` near 0 gives the linear root."""
+    sq = np.sqrt(b * b - a * c)
+    linear = np.abs(a) < 1e-12
+    t1 = np.where(linear, -c / (2.0 * b), (-b - sq) / a)
+    t2 = np.where(linear, np.nan, (-b + sq) / a)
+    return t1, t2
+
+
+def _disc_sampler(z: float, radius: float) -> Sampler:
+    def sample(rng: np.random.Generator, n: int) -> np.ndarray:
+        r = radius * np.sqrt(rng.random(n))  # sqrt: uniform by area, not by radius
+        a = rng.random(n) * (2.0 * np.pi)
+        return np.column_stack([r * np.cos(a), r * np.sin(a), np.full(n, z)])
+
+    return sample
+
+
+@dataclass(frozen=True)
+class Box:
+    """Axis-aligned box in its own frame, `size` (3,) metres, centred."""
+
+    size: tuple[float, float, float]
+    kind: str = "box"
+
+    @property
+    def half(self) -> np.ndarray:
+        return np.asarray(self.size, np.float64) / 2.0
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.linalg.norm(self.half))
+
+    def local_corners(self) -> np.ndarray:
+        """(8, 3) corners of the box, metres."""
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        return signs * self.half
+
+    @_quiet
+    def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Slab test: entry t (exit t when the origin is inside) and whether it is the +z face."""
+        half = self.half
+        t_in = np.full(len(o), -np.inf)
+        t_out = np.full(len(o), np.inf)
+        entry_axis = np.zeros(len(o), np.int8)
+        # Per axis on 1-D columns: reductions over a short (N, 3) axis are slow in numpy.
+        for axis in range(3):
+            da = d[:, axis]
+            # A zero direction component would give 0 * inf = NaN on the slab boundary; a tiny
+            # stand-in keeps the arithmetic finite and the answer unchanged.
+            inv = 1.0 / np.where(np.abs(da) < 1e-15, 1e-15, da)
+            t1 = (-half[axis] - o[:, axis]) * inv
+            t2 = (half[axis] - o[:, axis]) * inv
+            lo = np.minimum(t1, t2)
+            later = lo > t_in
+            entry_axis[later] = axis
+            t_in = np.where(later, lo, t_in)
+            t_out = np.minimum(t_out, np.maximum(t1, t2))
+        hit = t_out >= np.maximum(t_in, EPS)
+        inside = t_in <= EPS
+        t = np.where(hit, np.where(inside, t_out, t_in), np.inf)
+        # Entering through the +z face means travelling down onto it.
+        top = hit & ~inside & (entry_axis == 2) & (d[:, 2] < 0)
+        return t, top
+
+    def faces(self) -> list[Face]:
+        sx, sy, sz = self.size
+        half = self.half
+        out = []
+        for axis in range(3):
+            u, v = [a for a in range(3) if a != axis]
+            for sign in (-1.0, 1.0):
+
+                def sample(
+                    rng: np.random.Generator, n: int, axis=axis, u=u, v=v, sign=sign
+                ) -> np.ndarray:
+                    p = np.empty((n, 3))
+                    p[:, axis] = sign * half[axis]
+                    p[:, u] = (rng.random(n) - 0.5) * (2.0 * half[u])
+                    p[:, v] = (rng.random(n) - 0.5) * (2.0 * half[v])
+                    return p
+
+                area = (sx, sy, sz)[u] * (sx, sy, sz)[v]
+                out.append(Face(area, axis == 2 and sign > 0, sample))
+        return out
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """Cylinder along its z axis, `radius` and `height` metres, centred."""
+
+    radius: float
+    height: float
+    kind: str = "cylinder"
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.hypot(self.radius, self.height / 2.0))
+
+    @_quiet
+    def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r, h2 = self.radius, self.height / 2.0
+        a = d[:, 0] ** 2 + d[:, 1] ** 2
+        b = o[:, 0] * d[:, 0] + o[:, 1] * d[:, 1]
+        c = o[:, 0] ** 2 + o[:, 1] ** 2 - r * r
+        sq = np.sqrt(b * b - a * c)
+        sides = [(-b - sq) / a, (-b + sq) / a]
+        sides = [np.where(np.abs(o[:, 2] + s * d[:, 2]) <= h2, s, np.inf) for s in sides]
+        t_top = _disc_hit(o, d, h2, r)
+        t_bottom = _disc_hit(o, d, -h2, r)
+        t = _nearest_positive(sides[0], sides[1], t_top, t_bottom)
+        top = np.isfinite(t) & (t == t_top) & (d[:, 2] < 0)
+        return t, top
+
+    def faces(self) -> list[Face]:
+        r, h = self.radius, self.height
+
+        def side(rng: np.random.Generator, n: int) -> np.ndarray:
+            a = rng.random(n) * (2.0 * np.pi)
+            z = (rng.random(n) - 0.5) * h
+            return np.column_stack([r * np.cos(a), r * np.sin(a), z])
+
+        disc = np.pi * r * r
+        return [
+            Face(2.0 * np.pi * r * h, False, side),
+            Face(disc, True, _disc_sampler(h / 2.0, r)),
+            Face(disc, False, _disc_sampler(-h / 2.0, r)),
+        ]
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """Sphere of `radius` metres, centred."""
+
+    radius: float
+    kind: str = "sphere"
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(self.radius)
+
+    @_quiet
+    def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        b = np.einsum("ij,ij->i", o, d)
+        c = np.einsum("ij,ij->i", o, o) - self.radius**2
+        t1, t2 = _quadratic_roots(np.ones_like(b), b, c)
+        t = _nearest_positive(t1, t2)
+        return t, np.zeros(t.shape, bool)
+
+    def faces(self) -> list[Face]:
+        r = self.radius
+
+        def sample(rng: np.random.Generator, n: int) -> np.ndarray:
+            v = rng.standard_normal((n, 3))  # isotropic Gaussian, normalised: uniform on sphere
+            return r * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+        return [Face(4.0 * np.pi * r * r, False, sample)]
+
+
+@dataclass(frozen=True)
+class Cone:
+    """Cone along z: base disc of `radius` at z = -height/2, apex at z = +height/2, metres."""
+
+    radius: float
+    height: float
+    kind: str = "cone"
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.hypot(self.radius, self.height / 2.0))
+
+    @_quiet
+    def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        h2 = self.height / 2.0
+        k2 = (self.radius / self.height) ** 2
+        # Lateral surface: x^2 + y^2 = k^2 w^2 with w = h/2 - z the depth below the apex.
+        w0 = h2 - o[:, 2]
+        a = d[:, 0] ** 2 + d[:, 1] ** 2 - k2 * d[:, 2] ** 2
+        b = o[:, 0] * d[:, 0] + o[:, 1] * d[:, 1] + k2 * w0 * d[:, 2]
+        c = o[:, 0] ** 2 + o[:, 1] ** 2 - k2 * w0 * w0
+        roots = _quadratic_roots(a, b, c)
+        # The quadric is a double cone; keep only the nappe below the apex.
+        sides = [np.where(np.abs(o[:, 2] + s * d[:, 2]) <= h2, s, np.inf) for s in roots]
+        t_base = _disc_hit(o, d, -h2, self.radius)
+        t = _nearest_positive(sides[0], sides[1], t_base)
+        return t, np.zeros(t.shape, bool)
+
+    def faces(self) -> list[Face]:
+        r, h = self.radius, self.height
+        slant = float(np.hypot(r, h))
+
+        def side(rng: np.random.Generator, n: int) -> np.ndarray:
+            # Unrolled, the lateral surface is a circular sector: area density grows linearly
+            # with the distance s from the apex, so s = L sqrt(u).
+            f = np.sqrt(rng.random(n))
+            a = rng.random(n) * (2.0 * np.pi)
+            return np.column_stack([r * f * np.cos(a), r * f * np.sin(a), h / 2.0 - h * f])
+
+        return [
+            Face(np.pi * r * slant, False, side),
+            Face(np.pi * r * r, False, _disc_sampler(-h / 2.0, r)),
+        ]
+
+
+Shape = Box | Cylinder | Sphere | Cone

@@ -1,0 +1,462 @@
+"""Scene files (YAML) -> typed, posed primitives with ground-truth labels.
+
+A scene file::
+
+    name: demo                      # optional, defaults to the file stem
+    description: one line           # optional
+    trajectory: {kind: circle, center: [0, 0, 1.2], radius: 3, target: [0, 0, 0.5]}  # optional
+    define:                         # optional reusable parts, used with `use:`
+      chair:
+        - {kind: box, name: seat, size: [0.45, 0.45, 0.04], xyz: [0, 0, 0.45],
+           role: surface, surface: seat}
+        - {kind: cylinder, radius: 0.02, height: 0.43, xyz: [0.2, 0.2, 0.215], role: structure}
+    primitives:
+      - {kind: box, name: floor, size: [6, 6, 0.02], xyz: [0, 0, -0.01], role: surface,
+         surface: floor}
+      - {use: chair, name: chair_a, xyz: [1, 0, 0], rpy: [0, 0, 90]}
+      - {kind: group, name: lamp, xyz: [0, 0, 0.5], role: object, object: lamp, children: [...]}
+
+Every primitive has `kind` (box, cylinder, sphere, cone, group) or `use`, an optional `name`,
+`xyz` (metres) and `rpy` (degrees; R = Rz(yaw) Ry(pitch) Rx(roll), child poses compose with their
+parent's), and a `role`: `surface` (box or cylinder; only the +z face is a support surface, its
+other faces are structure; needs `surface: NAME`), `structure`, or `object` (needs `object: NAME`;
+parts sharing a name form one object). Groups and `use` pass `role`, `object` and `surface` down
+to children that do not set them. Names of objects and surfaces inside a `use` are scoped by the
+instance name ("chair_a/seat"), so two chairs give two seats. Ids are assigned in file order:
+surfaces 0..S-1, objects 0..O-1. Sizes: box `size: [x, y, z]`; cylinder and cone `radius`,
+`height`; sphere `radius` (metres, centred on the pose, see `supportnode.sim.primitives`).
+
+Errors raise `SceneError` naming file, line and key.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from supportnode.errors import SceneError
+from supportnode.sim.cloud import ROLE_OBJECT, ROLE_STRUCTURE, ROLE_SURFACE
+from supportnode.sim.primitives import KINDS, Box, Cone, Cylinder, Shape, Sphere
+
+SCENES_DIR = Path(__file__).resolve().parents[2] / "sim_scans" / "scenes"
+ROLES = ("surface", "structure", "object")
+_TOP_KEYS = {"name", "description", "trajectory", "define", "primitives"}
+_COMMON_KEYS = {"kind", "name", "xyz", "rpy", "role", "object", "surface"}
+_SHAPE_KEYS = {
+    "box": {"size"},
+    "cylinder": {"radius", "height"},
+    "cone": {"radius", "height"},
+    "sphere": {"radius"},
+    "group": {"children"},
+    "use": {"use"},
+}
+_TRAJ_KEYS = {
+    "circle": {"kind", "center", "radius", "target", "start_deg", "arc_deg", "level"},
+    "line": {"kind", "start", "end", "target", "level"},
+}
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """One posed shape with its labels.
+
+    pose: (4, 4) float64 shape-to-world transform. role: "surface" | "structure" | "object".
+    object_id / surface_id: -1 when not an object / not a surface. line: line in the scene file.
+    """
+
+    index: int
+    name: str
+    shape: Shape
+    pose: np.ndarray
+    role: str
+    object_id: int
+    surface_id: int
+    line: int
+
+    @property
+    def kind(self) -> str:
+        return self.shape.kind
+
+    def world_aabb(self) -> np.ndarray:
+        """(2, 3) float64 [min, max] world box containing the shape (exact for boxes; for round
+        shapes the box of their bounding cylinder/box), metres."""
+        s = self.shape
+        if isinstance(s, Box):
+            local = s.local_corners()
+        else:
+            r = s.radius
+            h2 = r if isinstance(s, Sphere) else s.height / 2.0
+            local = Box((2 * r, 2 * r, 2 * h2)).local_corners()
+        world = local @ self.pose[:3, :3].T + self.pose[:3, 3]
+        return np.stack([world.min(axis=0), world.max(axis=0)])
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A scene: primitives in file order, surface and object names indexed by id."""
+
+    name: str
+    primitives: tuple[Primitive, ...]
+    surface_names: tuple[str, ...]
+    object_names: tuple[str, ...]
+    description: str = ""
+    trajectory: dict[str, Any] = field(default_factory=dict)
+    source: str = "<string>"
+
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64 [min, max] world box of all primitives, metres."""
+        boxes = np.stack([p.world_aabb() for p in self.primitives])
+        return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+    def label_table(self) -> dict[str, np.ndarray]:
+        """Per-primitive lookup arrays, each (P,): role of the top face and of other faces
+        (int8), object id and surface id of the top face (int32)."""
+        code = {"surface": ROLE_SURFACE, "structure": ROLE_STRUCTURE, "object": ROLE_OBJECT}
+        is_surf = np.array([p.role == "surface" for p in self.primitives])
+        role = np.array([code[p.role] for p in self.primitives], np.int8)
+        return {
+            "role_top": role,
+            "role_other": np.where(is_surf, ROLE_STRUCTURE, role).astype(np.int8),
+            "object": np.array([p.object_id for p in self.primitives], np.int32),
+            "surface_top": np.array([p.surface_id for p in self.primitives], np.int32),
+        }
+
+
+def rpy_matrix(rpy_deg: tuple[float, float, float] | np.ndarray) -> np.ndarray:
+    """(3, 3) rotation Rz(yaw) Ry(pitch) Rx(roll) from (roll, pitch, yaw) in degrees."""
+    r, p, y = np.radians(np.asarray(rpy_deg, np.float64))
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def pose_matrix(xyz: Any = (0, 0, 0), rpy_deg: Any = (0, 0, 0)) -> np.ndarray:
+    """(4, 4) float64 transform from translation (metres) and roll/pitch/yaw (degrees)."""
+    t = np.eye(4)
+    t[:3, :3] = rpy_matrix(rpy_deg)
+    t[:3, 3] = xyz
+    return t
+
+
+# --- YAML with line numbers -------------------------------------------------------------------
+
+
+class _Map(dict):
+    """A mapping that remembers its own line and each key's line (1-based)."""
+
+    line: int = 0
+    key_lines: dict[Any, int]
+
+
+class _Seq(list):
+    line: int = 0
+    item_lines: list[int]
+
+
+class _Loader(yaml.SafeLoader):
+    pass
+
+
+def _construct_map(loader: _Loader, node: yaml.MappingNode) -> _Map:
+    loader.flatten_mapping(node)
+    m = _Map()
+    m.line = node.start_mark.line + 1
+    m.key_lines = {}
+    for k_node, v_node in node.value:
+        key = loader.construct_object(k_node, deep=True)
+        if key in m:
+            raise SceneError(f"{{file}}:{k_node.start_mark.line + 1}: duplicate key {key!r}")
+        m[key] = loader.construct_object(v_node, deep=True)
+        m.key_lines[key] = k_node.start_mark.line + 1
+    return m
+
+
+def _construct_seq(loader: _Loader, node: yaml.SequenceNode) -> _Seq:
+    s = _Seq(loader.construct_object(n, deep=True) for n in node.value)
+    s.line = node.start_mark.line + 1
+    s.item_lines = [n.start_mark.line + 1 for n in node.value]
+    return s
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
+
+
+# --- Parsing ----------------------------------------------------------------------------------
+
+
+class _Parser:
+    """Walks the loaded YAML, composing poses and assigning ids; every error names file:line."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.defines: _Map = _Map()
+        self.prims: list[Primitive] = []
+        self.surfaces: dict[str, int] = {}
+        self.objects: dict[str, int] = {}
+        self.use_counts: dict[str, int] = {}
+
+    def fail(self, line: int, msg: str) -> SceneError:
+        return SceneError(f"{self.source}:{line}: {msg}")
+
+    def line_of(self, m: _Map, key: str) -> int:
+        return m.key_lines.get(key, m.line) if isinstance(m, _Map) else 0
+
+    def numbers(self, m: _Map, key: str, n: int, label: str, positive: bool = False) -> list[float]:
+        value = m[key]
+        values = value if isinstance(value, list) else [value]
+        ok = len(values) == n and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for v in values
+        )
+        if ok and positive:
+            ok = all(v > 0 for v in values)
+        if not ok:
+            what = f"{n} {'positive ' if positive else ''}number{'s' if n > 1 else ''}"
+            raise self.fail(
+                self.line_of(m, key), f"{label}: key {key!r} must be {what}, got {value!r}"
+            )
+        return [float(v) for v in values]
+
+    def name_value(self, m: _Map, key: str, label: str) -> str:
+        value = m[key]
+        if isinstance(value, bool) or not isinstance(value, (str, int)):
+            raise self.fail(self.line_of(m, key), f"{label}: key {key!r} must be a name or an id")
+        return str(value)
+
+    def parse(self, doc: Any) -> None:
+        if not isinstance(doc, _Map):
+            raise self.fail(getattr(doc, "line", 1), "a scene must be a mapping with 'primitives'")
+        for key in doc:
+            if key not in _TOP_KEYS:
+                expected = ", ".join(sorted(_TOP_KEYS))
+                raise self.fail(doc.key_lines[key], f"unknown key {key!r} (expected {expected})")
+        if "primitives" not in doc:
+            raise self.fail(doc.line, "missing key 'primitives'")
+        if "define" in doc:
+            if not isinstance(doc["define"], _Map):
+                raise self.fail(doc.key_lines["define"], "'define' must map names to lists")
+            self.defines = doc["define"]
+        self.children(doc["primitives"], self.line_of(doc, "primitives"), np.eye(4), {}, "", "", [])
+        if not self.prims:
+            raise self.fail(doc.line, "the scene has no primitives")
+
+    def children(
+        self,
+        items: Any,
+        line: int,
+        parent: np.ndarray,
+        inherited: dict[str, Any],
+        scope: str,
+        path: str,
+        stack: list[str],
+    ) -> None:
+        if not isinstance(items, _Seq):
+            raise self.fail(line, f"{path or 'primitives'}: expected a list of primitives")
+        for i, item in enumerate(items):
+            label_path = f"{path}.{i}" if path else str(i)
+            if not isinstance(item, _Map):
+                raise self.fail(items.item_lines[i], f"primitive {label_path}: expected a mapping")
+            self.item(item, parent, inherited, scope, label_path, stack)
+
+    def item(
+        self,
+        m: _Map,
+        parent: np.ndarray,
+        inherited: dict[str, Any],
+        scope: str,
+        path: str,
+        stack: list[str],
+    ) -> None:
+        name = self.name_value(m, "name", f"primitive {path}") if "name" in m else ""
+        label = f"primitive {name!r}" if name else f"primitive {path}"
+        if "use" in m:
+            kind = "use"
+        elif "kind" not in m:
+            raise self.fail(m.line, f"{label}: missing key 'kind'")
+        else:
+            kind = m["kind"]
+            if kind not in KINDS and kind != "group":
+                expected = ", ".join((*KINDS, "group"))
+                raise self.fail(
+                    self.line_of(m, "kind"), f"{label}: unknown kind {kind!r} (expected {expected})"
+                )
+        allowed = _COMMON_KEYS | _SHAPE_KEYS[kind]
+        for key in m:
+            if key not in allowed:
+                raise self.fail(
+                    m.key_lines[key],
+                    f"{label}: unknown key {key!r} for {kind} (expected {', '.join(sorted(allowed))})",
+                )
+        for key in sorted(_SHAPE_KEYS[kind]):
+            if key not in m:
+                raise self.fail(m.line, f"{label}: missing key {key!r}")
+
+        xyz = self.numbers(m, "xyz", 3, label) if "xyz" in m else [0.0, 0.0, 0.0]
+        rpy = self.numbers(m, "rpy", 3, label) if "rpy" in m else [0.0, 0.0, 0.0]
+        pose = parent @ pose_matrix(xyz, rpy)
+        labels = dict(inherited)
+        for key in ("role", "object", "surface"):
+            if key in m:
+                labels[key] = (self.name_value(m, key, label), self.line_of(m, key), scope)
+
+        if kind == "group":
+            self.children(
+                m["children"], self.line_of(m, "children"), pose, labels, scope, path, stack
+            )
+            return
+        if kind == "use":
+            target = self.name_value(m, "use", label)
+            line = self.line_of(m, "use")
+            if target not in self.defines:
+                known = ", ".join(sorted(map(str, self.defines))) or "none defined"
+                raise self.fail(line, f"{label}: unknown define {target!r} (known: {known})")
+            if target in stack:
+                raise self.fail(line, f"{label}: define {target!r} uses itself")
+            count = self.use_counts.get(target, 0)
+            self.use_counts[target] = count + 1
+            instance = name or f"{target}_{count}"
+            new_scope = f"{scope}{instance}/"
+            self.children(
+                self.defines[target],
+                self.defines.key_lines[target],
+                pose,
+                labels,
+                new_scope,
+                f"{target}",
+                [*stack, target],
+            )
+            return
+        self.leaf(m, kind, name, label, pose, labels)
+
+    def leaf(
+        self, m: _Map, kind: str, name: str, label: str, pose: np.ndarray, labels: dict[str, Any]
+    ) -> None:
+        if kind == "box":
+            shape: Shape = Box(tuple(self.numbers(m, "size", 3, label, positive=True)))  # type: ignore[arg-type]
+        elif kind == "sphere":
+            shape = Sphere(self.numbers(m, "radius", 1, label, positive=True)[0])
+        else:
+            radius = self.numbers(m, "radius", 1, label, positive=True)[0]
+            height = self.numbers(m, "height", 1, label, positive=True)[0]
+            shape = Cylinder(radius, height) if kind == "cylinder" else Cone(radius, height)
+
+        if "role" not in labels:
+            raise self.fail(m.line, f"{label}: missing key 'role'")
+        role, role_line, _ = labels["role"]
+        if role not in ROLES:
+            raise self.fail(
+                role_line, f"{label}: unknown role {role!r} (expected {', '.join(ROLES)})"
+            )
+        object_id = surface_id = -1
+        if role == "surface":
+            if kind not in ("box", "cylinder"):
+                raise self.fail(
+                    role_line,
+                    f"{label}: role 'surface' needs a box or a cylinder (a {kind} has no flat top)",
+                )
+            if "surface" not in labels:
+                raise self.fail(m.line, f"{label}: missing key 'surface'")
+            value, _, scope = labels["surface"]
+            surface_id = self.surfaces.setdefault(scope + value, len(self.surfaces))
+        elif role == "object":
+            if "object" not in labels:
+                raise self.fail(m.line, f"{label}: missing key 'object'")
+            value, _, scope = labels["object"]
+            object_id = self.objects.setdefault(scope + value, len(self.objects))
+        index = len(self.prims)
+        self.prims.append(
+            Primitive(
+                index, name or f"{kind}_{index}", shape, pose, role, object_id, surface_id, m.line
+            )
+        )
+
+
+def _parse_trajectory(p: _Parser, doc: Any) -> dict[str, Any]:
+    if not isinstance(doc, _Map) or "trajectory" not in doc:
+        return {}
+    t = doc["trajectory"]
+    line = doc.key_lines["trajectory"]
+    if not isinstance(t, _Map) or t.get("kind") not in _TRAJ_KEYS:
+        raise p.fail(line, "trajectory: expected a mapping with kind circle or line")
+    allowed = _TRAJ_KEYS[t["kind"]]
+    for key in t:
+        if key not in allowed:
+            raise p.fail(
+                t.key_lines[key],
+                f"trajectory: unknown key {key!r} (expected {', '.join(sorted(allowed))})",
+            )
+    out: dict[str, Any] = {"kind": t["kind"]}
+    for key in sorted(allowed - {"kind"}):
+        if key in t:
+            if key == "level":
+                out[key] = bool(t[key])
+            elif key in ("radius", "start_deg", "arc_deg"):
+                out[key] = p.numbers(t, key, 1, "trajectory")[0]
+            else:
+                out[key] = p.numbers(t, key, 3, "trajectory")
+    needed = {"circle": ("center", "radius"), "line": ("start", "end")}[t["kind"]]
+    for key in needed:
+        if key not in out:
+            raise p.fail(t.line, f"trajectory: missing key {key!r}")
+    return out
+
+
+def parse_scene(text: str, source: str = "<string>", name: str = "scene") -> Scene:
+    """A `Scene` from YAML text; `source` names the file in error messages."""
+    parser = _Parser(source)
+    try:
+        doc = yaml.load(text, Loader=_Loader)  # safe: _Loader derives from SafeLoader
+    except SceneError as err:  # duplicate key raised from inside the loader
+        raise SceneError(str(err).replace("{file}", source)) from None
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else 0
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise SceneError(f"{source}:{line}: invalid YAML: {problem}") from err
+    parser.parse(doc)
+    return Scene(
+        name=str(doc.get("name", name)),
+        primitives=tuple(parser.prims),
+        surface_names=tuple(parser.surfaces),
+        object_names=tuple(parser.objects),
+        description=str(doc.get("description", "")),
+        trajectory=_parse_trajectory(parser, doc),
+        source=source,
+    )
+
+
+def bundled_scenes() -> list[str]:
+    """Names of the scenes shipped in sim_scans/scenes/."""
+    return sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
+
+
+def scene_path(name_or_path: str | Path) -> Path:
+    """The YAML file for a bundled scene name (e.g. "shelf") or a path to a YAML file."""
+    p = Path(name_or_path)
+    if p.suffix in (".yaml", ".yml") or p.exists():
+        if not p.is_file():
+            raise SceneError(f"{p}: scene file not found")
+        return p
+    bundled = SCENES_DIR / f"{p.name}.yaml"
+    if not bundled.is_file():
+        names = ", ".join(bundled_scenes()) or "none found"
+        raise SceneError(f"unknown scene {str(name_or_path)!r} (bundled: {names}; or a .yaml path)")
+    return bundled
+
+
+def load_scene(name_or_path: str | Path) -> Scene:
+    """Load a bundled scene by name or a scene YAML file by path."""
+    path = scene_path(name_or_path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise SceneError(f"{path.name}: cannot read scene: {err}") from err
+    return parse_scene(text, source=path.name, name=path.stem)

@@ -1,0 +1,203 @@
+"""Sensors: area sampling of the scene mesh, ray casting, a spinning lidar and a depth camera.
+
+Sensor frames follow REP-103 (x forward, y left, z up), for the camera too, so one pose convention
+serves both; `OPTICAL_FROM_BODY` converts camera points to the optical convention (z forward,
+x right, y down) if needed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from supportnode.sim.cloud import ROLE_SURFACE, SimCloud, empty_cloud, rotate
+from supportnode.sim.scene import Scene
+
+# Rotation taking body (x fwd, y left, z up) vectors to optical (z fwd, x right, y down) ones.
+OPTICAL_FROM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+_CHUNK = 1 << 20  # points generated per face per step when sampling: bounds temporary memory
+
+
+def _labels(scene: Scene, prim: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, ...]:
+    """role (int8), object (int32), surface (int32) for hits on primitives `prim` ((N,) int)."""
+    table = scene.label_table()
+    role = np.where(top, table["role_top"][prim], table["role_other"][prim]).astype(np.int8)
+    surface = np.where(role == ROLE_SURFACE, table["surface_top"][prim], -1).astype(np.int32)
+    return role, table["object"][prim], surface
+
+
+def sample_scene(scene: Scene, n_points: int, seed: int = 0) -> SimCloud:
+    """Exactly `n_points` points spread uniformly by area over every face of every primitive
+    (hidden faces included: a mesh sampling, as in the report), world frame, float32 metres.
+
+    Points come grouped by primitive and face, in scene order. Memory: the output plus one
+    chunk (about 1M points) of temporaries, so tens of millions of points are fine.
+    """
+    if n_points < 0:
+        raise ValueError("n_points must be >= 0")
+    rng = np.random.default_rng(seed)
+    faces = [(p, f) for p in scene.primitives for f in p.shape.faces()]
+    areas = np.array([f.area for _, f in faces])
+    counts = rng.multinomial(n_points, areas / areas.sum())
+    table = scene.label_table()
+    out = empty_cloud(n_points)
+    start = 0
+    for (prim, face), count in zip(faces, counts, strict=True):
+        i = prim.index
+        is_surface = face.top and prim.role == "surface"
+        sl = slice(start, start + count)
+        out.role[sl] = table["role_top"][i] if face.top else table["role_other"][i]
+        out.primitive[sl] = i
+        out.object[sl] = prim.object_id
+        out.surface[sl] = prim.surface_id if is_surface else -1
+        rot, trans = prim.pose[:3, :3], prim.pose[:3, 3]
+        for lo in range(0, count, _CHUNK):
+            n = min(_CHUNK, count - lo)
+            local = face.sample(rng, n)
+            out.points[start + lo : start + lo + n] = rotate(local, rot) + trans
+        start += count
+    return out
+
+
+def raycast(
+    scene: Scene, origin: np.ndarray, dirs: np.ndarray, max_range: float = np.inf
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nearest hit of each ray in the scene (occlusion: the closest primitive wins).
+
+    origin: (3,) float64 world position shared by all rays, metres. dirs: (N, 3) float64 unit
+    world directions. Returns t (N,) float64 range (inf for no hit within max_range), prim (N,)
+    int32 primitive index (-1 for none), top (N,) bool (hit on the primitive's +z face).
+
+    One vectorised test per primitive over the rays that pass its bounding sphere and could still
+    beat the current nearest hit; primitives are visited nearest first so far ones are culled.
+    """
+    origin = np.asarray(origin, np.float64)
+    n = dirs.shape[0]
+    best = np.full(n, float(max_range))
+    prim = np.full(n, -1, np.int32)
+    top = np.zeros(n, bool)
+    centres = np.array([p.pose[:3, 3] for p in scene.primitives]) - origin
+    order = np.argsort(np.linalg.norm(centres, axis=1))
+    for k in order:
+        p = scene.primitives[k]
+        c, r = centres[k], p.shape.bounding_radius
+        tc = dirs @ c  # distance along each ray to the point nearest the sphere centre
+        miss2 = c @ c - tc * tc
+        cand = np.flatnonzero((miss2 <= r * r) & (tc + r > 0) & (tc - r < best))
+        if cand.size == 0:
+            continue
+        rot = p.pose[:3, :3]
+        o_local = np.broadcast_to(-c @ rot, (cand.size, 3))  # origin in the shape frame
+        d_local = rotate(dirs[cand], rot.T)
+        t, t_top = p.shape.intersect(o_local, d_local)
+        closer = t < best[cand]
+        idx = cand[closer]
+        best[idx] = t[closer]
+        prim[idx] = k
+        top[idx] = t_top[closer]
+    best[prim < 0] = np.inf
+    return best, prim, top
+
+
+def _scan(
+    scene: Scene,
+    dirs_sensor: np.ndarray,
+    pose: np.ndarray,
+    min_range: float,
+    max_range: float,
+    stamp: float,
+) -> SimCloud:
+    """Cast sensor-frame unit rays from `pose` (4x4 sensor-to-world); world-frame SimCloud."""
+    pose = np.asarray(pose, np.float64)
+    dirs = rotate(dirs_sensor, pose[:3, :3])
+    t, prim, top = raycast(scene, pose[:3, 3], dirs, max_range)
+    # A return closer than min_range is blocked by the near object, not seen through it.
+    keep = np.flatnonzero((prim >= 0) & (t >= min_range))
+    points = pose[:3, 3] + dirs[keep] * t[keep, None]
+    role, obj, surface = _labels(scene, prim[keep], top[keep])
+    return SimCloud(
+        points=points.astype(np.float32),
+        role=role,
+        primitive=prim[keep],
+        object=obj,
+        surface=surface,
+        sensor_pose=pose.copy(),
+        stamp=float(stamp),
+    )
+
+
+@dataclass(frozen=True)
+class Lidar:
+    """Spinning multi-beam lidar: `beams` rings evenly spread over [fov_min_deg, fov_max_deg]
+    elevation, `columns` azimuth steps over 360 degrees, ranges in metres, rate in Hz."""
+
+    beams: int = 16
+    fov_min_deg: float = -15.0
+    fov_max_deg: float = 15.0
+    columns: int = 1800
+    min_range: float = 0.3
+    max_range: float = 100.0
+    rate: float = 10.0
+
+    @classmethod
+    def preset(cls, name: str) -> Lidar:
+        """`vlp16` (16 beams, -15..15 deg, 1800 columns) or `os128` (128, -22.5..22.5, 1024)."""
+        presets = {
+            "vlp16": cls(16, -15.0, 15.0, 1800, 0.3, 100.0, 10.0),
+            "os128": cls(128, -22.5, 22.5, 1024, 0.3, 120.0, 10.0),
+        }
+        if name not in presets:
+            raise ValueError(f"unknown lidar preset {name!r} (expected {', '.join(presets)})")
+        return presets[name]
+
+    def directions(self) -> np.ndarray:
+        """(beams * columns, 3) float64 unit rays in the sensor frame, ring-major."""
+        el = np.radians(np.linspace(self.fov_min_deg, self.fov_max_deg, self.beams))
+        az = np.arange(self.columns) * (2.0 * np.pi / self.columns)
+        el, az = np.meshgrid(el, az, indexing="ij")
+        ce = np.cos(el)
+        return np.stack([ce * np.cos(az), ce * np.sin(az), np.sin(el)], axis=-1).reshape(-1, 3)
+
+    def scan(self, scene: Scene, pose: np.ndarray, stamp: float = 0.0) -> SimCloud:
+        """One sweep from `pose` (4x4 sensor-to-world) as a world-frame SimCloud (misses and
+        returns outside [min_range, max_range] are dropped). The sweep is instantaneous."""
+        return _scan(scene, self.directions(), pose, self.min_range, self.max_range, stamp)
+
+
+@dataclass(frozen=True)
+class DepthCamera:
+    """Pinhole depth camera, `width` x `height` pixels, horizontal field of view in degrees,
+    square pixels, principal point at the image centre. Looks along +x of its body frame."""
+
+    width: int = 640
+    height: int = 480
+    hfov_deg: float = 70.0
+    min_range: float = 0.2
+    max_range: float = 10.0
+    rate: float = 30.0
+
+    @classmethod
+    def preset(cls, name: str) -> DepthCamera:
+        """`d435` (848 x 480, 87 deg hfov, 30 Hz) or `vga` (640 x 480, 70 deg)."""
+        presets = {"d435": cls(848, 480, 87.0, 0.2, 10.0, 30.0), "vga": cls()}
+        if name not in presets:
+            raise ValueError(f"unknown camera preset {name!r} (expected {', '.join(presets)})")
+        return presets[name]
+
+    def directions(self) -> np.ndarray:
+        """(height * width, 3) float64 unit rays in the body frame, row-major from the top-left
+        pixel. Max range applies along the ray (not the optical depth)."""
+        f = (self.width / 2.0) / np.tan(np.radians(self.hfov_deg) / 2.0)
+        u = np.arange(self.width) + 0.5 - self.width / 2.0
+        v = np.arange(self.height) + 0.5 - self.height / 2.0
+        vv, uu = np.meshgrid(v, u, indexing="ij")
+        d = np.stack([np.full(uu.shape, f), -uu, -vv], axis=-1).reshape(-1, 3)
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def scan(self, scene: Scene, pose: np.ndarray, stamp: float = 0.0) -> SimCloud:
+        """One depth image from `pose` (4x4 body-to-world) as a world-frame SimCloud."""
+        return _scan(scene, self.directions(), pose, self.min_range, self.max_range, stamp)
+
+
+Sensor = Lidar | DepthCamera

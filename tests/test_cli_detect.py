@@ -1,0 +1,124 @@
+"""`supportnode detect` end to end: files written, labels aligned with input rows, bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import box_points, plane_points
+
+from supportnode.cli import main
+from supportnode.io.clouds import read_cloud, write_pcd, write_ply
+
+
+@pytest.fixture
+def table_cloud(tmp_path, rng):
+    """Floor, a table at 0.75 m, two boxes on the table; written as PLY."""
+    pts = np.vstack(
+        [
+            plane_points(rng, -1.5, 1.5, -1.5, 1.5, 0.0, 40000),
+            plane_points(rng, -0.6, 0.6, -0.4, 0.4, 0.75, 15000),
+            box_points(rng, (-0.3, 0.0, 0.85), (0.15, 0.15, 0.2), 2000),
+            box_points(rng, (0.3, 0.1, 0.80), (0.2, 0.1, 0.1), 2000),
+        ]
+    )
+    path = tmp_path / "room.ply"
+    write_ply(path, pts)
+    return path, pts
+
+
+def test_detect_writes_every_output(table_cloud, tmp_path, capsys):
+    path, pts = table_cloud
+    out = tmp_path / "out"
+    assert main(["detect", str(path), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "0.750" in printed and "objects: 2 clusters" in printed
+    result = json.loads((out / "result.json").read_text())
+    heights = [round(s["height"], 3) for s in result["surfaces"]]
+    assert heights == [0.0, 0.75]
+    assert set(result["timings"]) >= {"read", "surfaces", "objects", "free_space"}
+    assert result["params"]["surfaces"]["method"] == "planar"
+    assert len(result["objects"]) == 2
+    assert all(o["surface_id"] == 1 for o in result["objects"])
+    labels = np.load(out / "labels.npz")
+    assert labels["surface"].shape == (len(pts),) and labels["surface"].dtype == np.int32
+    assert labels["object"].shape == (len(pts),)
+    assert (labels["surface"] == 1).sum() == result["surfaces"][1]["point_count"]
+    det = read_cloud(out / "room_detected.ply")
+    rest = read_cloud(out / "room_not_detected.ply")
+    assert len(det.points) + len(rest.points) == len(pts)
+    assert (det.fields["rgb"] == [255, 0, 0]).all() and (rest.fields["rgb"] == [0, 255, 0]).all()
+    objs = sorted((out / "room_objects").glob("*.ply"))
+    assert [p.name for p in objs] == ["000.ply", "001.ply"]
+    sizes = [len(read_cloud(p).points) for p in objs]
+    assert sizes == sorted(sizes, reverse=True)
+    assert sizes[0] == result["objects"][0]["point_count"]
+
+
+def test_labels_follow_input_rows_with_nan(tmp_path, rng):
+    pts = plane_points(rng, 0, 1, 0, 1, 0.5, 5000)
+    pts[::7] = np.nan  # an organised cloud's missing pixels
+    path = tmp_path / "org.pcd"
+    write_pcd(path, pts, data="binary")
+    out = tmp_path / "o"
+    assert main(["detect", str(path), "--out", str(out), "--no-objects", "--quiet"]) == 0
+    surface = np.load(out / "labels.npz")["surface"]
+    assert surface.shape == (5000,)
+    assert (surface[::7] == -1).all()
+    assert (surface[np.isfinite(pts).all(axis=1)] == 0).mean() > 0.97
+    result = json.loads((out / "result.json").read_text())
+    assert result["input"]["dropped_nonfinite"] == len(pts[::7])
+
+
+def test_set_and_config_change_parameters(table_cloud, tmp_path):
+    path, _ = table_cloud
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("surfaces:\n  method: seed\n")
+    out = tmp_path / "o"
+    assert main(["detect", str(path), "--config", str(cfg), "--set", "surfaces.psi_min=5",
+                 "--out", str(out), "--quiet"]) == 0
+    params = json.loads((out / "result.json").read_text())["params"]
+    assert params["surfaces"]["method"] == "seed" and params["surfaces"]["psi_min"] == 5
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda d: d / "missing.ply", "missing.ply"),
+        (lambda d: _write(d / "cloud.foo", "1 2 3\n"), "unknown extension"),
+        (lambda d: _write(d / "empty.xyz", ""), "empty.xyz"),
+        (lambda d: _write(d / "bad.pcd", "VERSION 0.7\nFIELDS x y z\n"), "bad.pcd"),
+    ],
+)
+def test_bad_input_one_line_exit_2(tmp_path, capsys, make, message):
+    path = make(tmp_path)
+    assert main(["detect", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_bad_config_key_names_file_and_line(table_cloud, tmp_path, capsys):
+    path, _ = table_cloud
+    cfg = _write(tmp_path / "typo.yaml", "surfaces:\n  voxl_size: [0.1, 0.1, 0.1]\n")
+    assert main(["detect", str(path), "--config", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    assert "typo.yaml:2" in err and "voxel_size" in err
+
+
+def test_console_command_runs_as_a_process(table_cloud, tmp_path):
+    path, _ = table_cloud
+    proc = subprocess.run(
+        [sys.executable, "-m", "supportnode", "detect", str(path), "--out", str(tmp_path / "p"),
+         "--set", "surfaces.method=sed"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 2
+    assert "surfaces.method" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path

@@ -1,0 +1,359 @@
+"""Object segmentation on hand-built clouds with known answers."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from supportnode.errors import InputError
+from supportnode.geometry.objects import detect_objects
+from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.params import ObjectParams
+
+CELL = 0.1  # coarse surface footprint grid, as the surface detector uses
+
+
+def make_surface(sid: int, height: float, x0: float, x1: float, y0: float, y1: float) -> Surface:
+    """A rectangular horizontal surface with footprint cells consistent with its extent."""
+    ii, jj = np.meshgrid(
+        np.arange(int(np.floor(x0 / CELL + 1e-9)), int(np.ceil(x1 / CELL - 1e-9))),
+        np.arange(int(np.floor(y0 / CELL + 1e-9)), int(np.ceil(y1 / CELL - 1e-9))),
+        indexing="ij",
+    )
+    cells = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)
+    area = (x1 - x0) * (y1 - y0)
+    return Surface(
+        id=sid,
+        height=height,
+        area=area,
+        centroid=np.array([(x0 + x1) / 2, (y0 + y1) / 2, height]),
+        normal=np.array([0.0, 0.0, 1.0]),
+        flatness=0.0,
+        bbox_min=np.array([x0, y0, height]),
+        bbox_max=np.array([x1, y1, height]),
+        outline=[np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])],
+        point_count=0,
+        voxel_count=len(cells),
+        cells=cells,
+        cell_size=(CELL, CELL),
+    )
+
+
+def plane(x0: float, x1: float, y0: float, y1: float, z: float, step: float = 0.02) -> np.ndarray:
+    """Grid points of a horizontal rectangle, (P, 3)."""
+    xs = np.arange(x0 + step / 2, x1, step)
+    ys = np.arange(y0 + step / 2, y1, step)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    return np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)], axis=1)
+
+
+def box(lo, hi, step: float = 0.01) -> np.ndarray:
+    """Points on the five visible faces of an axis-aligned box (no bottom), (P, 3)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    faces = []
+    for axis in range(3):
+        others = [a for a in range(3) if a != axis]
+        u = np.arange(lo[others[0]], hi[others[0]] + 1e-9, step)
+        v = np.arange(lo[others[1]], hi[others[1]] + 1e-9, step)
+        gu, gv = np.meshgrid(u, v, indexing="ij")
+        ends = (lo[axis], hi[axis]) if axis < 2 else (hi[axis],)
+        for w in ends:
+            f = np.empty((gu.size, 3))
+            f[:, others[0]], f[:, others[1]], f[:, axis] = gu.ravel(), gv.ravel(), w
+            faces.append(f)
+    return np.unique(np.round(np.concatenate(faces), 9), axis=0)
+
+
+def cylinder(cx: float, cy: float, r: float, z0: float, z1: float, step: float = 0.01):
+    """Side and top of a vertical cylinder, (P, 3)."""
+    n_a = int(np.ceil(2 * np.pi * r / step))
+    a = np.linspace(0, 2 * np.pi, n_a, endpoint=False)
+    zs = np.arange(z0, z1 + 1e-9, step)
+    ga, gz = np.meshgrid(a, zs, indexing="ij")
+    side = np.stack([cx + r * np.cos(ga.ravel()), cy + r * np.sin(ga.ravel()), gz.ravel()], 1)
+    top = plane(cx - r, cx + r, cy - r, cy + r, z1, step)
+    top = top[(top[:, 0] - cx) ** 2 + (top[:, 1] - cy) ** 2 <= r * r]
+    return np.concatenate([side, top])
+
+
+def scene(parts: list[tuple[np.ndarray, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenate (points, label) parts; label >= 0 is a surface id, -1 an object part."""
+    pts = np.concatenate([p for p, _ in parts])
+    lab = np.concatenate([np.full(len(p), s, dtype=np.int32) for p, s in parts])
+    return pts, lab
+
+
+TABLE_Z = 0.75
+BOXES = [
+    ((0.2, 0.2, TABLE_Z), (0.5, 0.4, TABLE_Z + 0.3)),  # largest
+    ((0.9, 0.3, TABLE_Z), (1.1, 0.5, TABLE_Z + 0.15)),
+    ((1.5, 0.5, TABLE_Z), (1.6, 0.6, TABLE_Z + 0.1)),  # smallest
+]
+
+
+@pytest.fixture
+def table_scene():
+    table = make_surface(0, TABLE_Z, 0.0, 2.0, 0.0, 1.0)
+    boxes = [box(lo, hi) for lo, hi in BOXES]
+    pts, lab = scene([(plane(0, 2, 0, 1, TABLE_Z), 0)] + [(b, -1) for b in boxes])
+    return pts, SurfaceResult(surfaces=[table], labels=lab), boxes
+
+
+def test_three_boxes(table_scene):
+    pts, surf, boxes = table_scene
+    res = detect_objects(pts, surf)
+    assert len(res.clusters) == 3
+    assert res.labels.dtype == np.int32 and res.labels.shape == (len(pts),)
+    assert (res.labels[surf.labels >= 0] == -1).all()
+    for c, b, (lo, hi) in zip(res.clusters, boxes, BOXES, strict=True):
+        assert c.point_count == len(b) == (res.labels == c.id).sum()
+        assert c.surface_id == 0
+        np.testing.assert_allclose(c.bbox_min, lo, atol=1e-9)
+        np.testing.assert_allclose(c.bbox_max, hi, atol=1e-9)
+        assert c.height == pytest.approx(hi[2] - TABLE_Z)
+        size = np.array(hi) - np.array(lo)
+        np.testing.assert_allclose(c.obb_size, [max(size[:2]), min(size[:2]), size[2]], atol=1e-6)
+        np.testing.assert_allclose(c.obb_center, (np.array(lo) + hi) / 2, atol=1e-6)
+        assert c.volume == pytest.approx(np.prod(size), rel=1e-6)
+        # Footprint: the box's rectangle, counter-clockwise (positive signed area).
+        fp = c.footprint
+        signed = 0.5 * np.sum(fp[:, 0] * np.roll(fp[:, 1], -1) - np.roll(fp[:, 0], -1) * fp[:, 1])
+        assert signed == pytest.approx(size[0] * size[1], rel=1e-6)
+    json.dumps([c.to_dict() for c in res.clusters])
+
+
+def test_yaw_of_long_box():
+    table = make_surface(0, 0.0, -1, 1, -1, 1)
+    b = box((-0.3, -0.05, 0.0), (0.3, 0.05, 0.1))
+    ang = np.deg2rad(30)
+    rot = np.array([[np.cos(ang), -np.sin(ang), 0], [np.sin(ang), np.cos(ang), 0], [0, 0, 1]])
+    pts = b @ rot.T + [0.2, 0.1, 0.0]
+    res = detect_objects(pts, SurfaceResult([table], np.full(len(pts), -1, np.int32)))
+    (c,) = res.clusters
+    assert c.obb_yaw == pytest.approx(ang, abs=1e-3)
+    np.testing.assert_allclose(c.obb_size, [0.6, 0.1, 0.1], atol=2e-3)
+    np.testing.assert_allclose(c.obb_center, [0.2, 0.1, 0.05], atol=2e-3)
+
+
+@pytest.mark.parametrize("method", ["voxel", "knn"])
+def test_point_order_and_translation_invariance(table_scene, method):
+    pts, surf, _ = table_scene
+    params = ObjectParams(method=method, sample_fraction=1.0)
+    ref = detect_objects(pts, surf, params)
+    perm = np.random.default_rng(3).permutation(len(pts))
+    res = detect_objects(pts[perm], SurfaceResult(surf.surfaces, surf.labels[perm]), params)
+    np.testing.assert_array_equal(res.labels, ref.labels[perm])
+    shifted_surf = [make_surface(0, TABLE_Z, 3.0, 5.0, -2.0, -1.0)]
+    moved = pts + [3.0, -2.0, 0.0]
+    res = detect_objects(moved, SurfaceResult(shifted_surf, surf.labels), params)
+    np.testing.assert_array_equal(res.labels, ref.labels)
+    assert [c.surface_id for c in res.clusters] == [0, 0, 0]
+    for a, b in zip(res.clusters, ref.clusters, strict=True):
+        np.testing.assert_allclose(a.centroid, b.centroid + [3.0, -2.0, 0.0], atol=1e-9)
+
+
+def test_knn_full_sample_matches_voxel(table_scene):
+    pts, surf, _ = table_scene
+    vox = detect_objects(pts, surf, ObjectParams(method="voxel"))
+    knn = detect_objects(pts, surf, ObjectParams(method="knn", sample_fraction=1.0, k=10))
+    np.testing.assert_array_equal(knn.labels, vox.labels)
+    assert knn.stats["sampled"] == knn.stats["candidates"]
+
+
+def test_knn_sampled_is_seeded_and_labels_everything_nearby(table_scene):
+    pts, surf, boxes = table_scene
+    params = ObjectParams(method="knn", sample_fraction=0.3, k=20, seed=7)
+    a = detect_objects(pts, surf, params)
+    b = detect_objects(pts, surf, params)
+    np.testing.assert_array_equal(a.labels, b.labels)
+    assert a.stats["sampled"] == round(0.3 * sum(len(x) for x in boxes))
+    assert [c.point_count for c in a.clusters] == [len(x) for x in boxes]
+
+
+def two_cylinders(gap: float, r: float = 0.15):
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    c1 = cylinder(-r - gap / 2, 0.0, r, 0.0, 0.3)
+    c2 = cylinder(r + gap / 2, 0.0, r, 0.0, 0.25)
+    pts, lab = scene([(plane(-1, 1, -1, 1, 0.0, 0.04), 0), (c1, -1), (c2, -1)])
+    return pts, SurfaceResult([floor], lab), len(c1), len(c2)
+
+
+def test_touching_cylinders_split():
+    pts, surf, n1, n2 = two_cylinders(gap=0.0)
+    merged = detect_objects(pts, surf, ObjectParams(split_touching=False))
+    assert len(merged.clusters) == 1
+    split = detect_objects(pts, surf, ObjectParams(split_touching=True))
+    assert len(split.clusters) == 2
+    assert split.stats["merged_splits"] == 1
+    # Each part is one cylinder: left cylinder (x < 0) is the taller and larger one.
+    left, right = sorted(split.clusters, key=lambda c: c.centroid[0])
+    assert left.centroid[0] < 0 < right.centroid[0]
+    # Ground truth: the first n1 object points are the left cylinder. The cut may miss the
+    # contact by about a raster cell (1 cm), where wall points crowd: a few percent.
+    obj = split.labels[surf.labels == -1]
+    assert (obj[:n1] == left.id).mean() > 0.95 and (obj[n1:] == right.id).mean() > 0.95
+    assert left.height == pytest.approx(0.3)
+    assert right.obb_size[2] < 0.3 + 1e-9  # a few top points of the taller one at most
+    assert left.bbox_max[0] == pytest.approx(0.0, abs=0.015)
+    assert (merged.labels >= 0).sum() == (split.labels >= 0).sum() == n1 + n2
+
+
+def test_row_of_three_touching_barrels_split_into_three():
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    r = 0.15
+    row = np.concatenate([cylinder(x, 0.0, r, 0.0, 0.4, 0.015) for x in (-2 * r, 0.0, 2 * r)])
+    res = detect_objects(row, SurfaceResult([floor], np.full(len(row), -1, np.int32)))
+    assert len(res.clusters) == 3
+    xs = sorted(c.centroid[0] for c in res.clusters)
+    # The cut lies within about a raster cell (1 cm) of each contact, but wall points crowd at
+    # a contact, so a few mm of cut moves hundreds of points and a centroid by up to ~2.5 cm.
+    np.testing.assert_allclose(xs, [-2 * r, 0.0, 2 * r], atol=0.03)
+    n = len(row) / 3
+    assert all(abs(c.point_count - n) < 0.1 * n for c in res.clusters)
+
+
+def test_single_objects_not_split(table_scene):
+    pts, surf, _ = table_scene
+    res = detect_objects(pts, surf, ObjectParams(split_touching=True))
+    assert res.stats["merged_splits"] == 0
+    # A lone cylinder and an L-shaped box pair (a wide junction, not a neck) stay whole.
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    ell = np.concatenate(
+        [box((0.0, 0.0, 0.0), (0.4, 0.15, 0.2)), box((0.0, 0.0, 0.0), (0.15, 0.4, 0.2))]
+    )
+    for obj in (cylinder(0, 0, 0.1, 0, 0.3), ell):
+        r = detect_objects(obj, SurfaceResult([floor], np.full(len(obj), -1, np.int32)))
+        assert len(r.clusters) == 1 and r.stats["merged_splits"] == 0
+
+
+def test_stack_of_boxes_is_one_object():
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    stack = np.concatenate(
+        [box((0, 0, 0), (0.4, 0.4, 0.2)), box((0.1, 0.1, 0.2), (0.3, 0.3, 0.35))]
+    )
+    r = detect_objects(stack, SurfaceResult([floor], np.full(len(stack), -1, np.int32)))
+    assert len(r.clusters) == 1 and r.clusters[0].height == pytest.approx(0.35)
+
+
+def chair_leg_scene(with_floor: bool):
+    """A table (z 0.75) and, 5 cm beside its edge, a chair leg column from the floor to 0.9 m."""
+    table = make_surface(1 if with_floor else 0, TABLE_Z, 0.0, 1.0, 0.0, 1.0)
+    floor = make_surface(0, 0.0, -1.0, 2.0, -1.0, 2.0)
+    leg = box((1.05, 0.5, 0.02), (1.08, 0.53, 0.9))  # floor points within 2 cm removed
+    on_table = box((0.85, 0.45, TABLE_Z), (0.95, 0.55, TABLE_Z + 0.1))
+    parts = [(plane(0, 1, 0, 1, TABLE_Z), table.id), (leg, -1), (on_table, -1)]
+    surfaces = [table]
+    if with_floor:
+        fl = plane(-1, 2, -1, 2, 0.0, 0.05)
+        fl = fl[~((fl[:, 0] > 0) & (fl[:, 0] < 1) & (fl[:, 1] > 0) & (fl[:, 1] < 1))]
+        parts.insert(0, (fl, 0))
+        surfaces = [floor, table]
+    pts, lab = scene(parts)
+    return pts, SurfaceResult(surfaces, lab), len(leg)
+
+
+@pytest.mark.parametrize("with_floor", [True, False])
+def test_chair_leg_stands_on_floor_not_table(with_floor):
+    pts, surf, n_leg = chair_leg_scene(with_floor)
+    res = detect_objects(pts, surf)
+    assert len(res.clusters) == 2
+    leg = next(c for c in res.clusters if c.point_count == n_leg)
+    cup = next(c for c in res.clusters if c.point_count != n_leg)
+    assert leg.surface_id == (0 if with_floor else None)
+    table_id = 1 if with_floor else 0
+    assert cup.surface_id == table_id
+    assert cup.height == pytest.approx(0.1)
+    if with_floor:
+        assert leg.height == pytest.approx(0.9)
+    else:
+        assert leg.height == pytest.approx(0.88)  # above its own bottom
+
+
+def test_object_in_footprint_hole_stands_on_table():
+    """Cells under an object hold no table points; the table is still what it stands on."""
+    table = make_surface(0, 0.5, 0, 1, 0, 1)
+    hole = (table.cells[:, 0] >= 4) & (table.cells[:, 0] < 6) & (table.cells[:, 1] >= 4)
+    hole &= table.cells[:, 1] < 6
+    table.cells = table.cells[~hole]
+    b = box((0.42, 0.42, 0.52), (0.58, 0.58, 0.7))
+    r = detect_objects(b, SurfaceResult([table], np.full(len(b), -1, np.int32)))
+    assert r.clusters[0].surface_id == 0
+
+
+def test_floating_object_has_no_surface():
+    table = make_surface(0, 0.5, 0, 1, 0, 1)
+    b = box((0.4, 0.4, 0.8), (0.6, 0.6, 0.9))  # 30 cm above the table: a lamp shade, a shelf
+    r = detect_objects(b, SurfaceResult([table], np.full(len(b), -1, np.int32)))
+    assert r.clusters[0].surface_id is None
+    assert r.clusters[0].height == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("method", ["voxel", "knn"])
+def test_noise_specks_dropped(table_scene, method):
+    # knn with k >= a speck's size links the speck to its nearest object (Algorithm 2 has no
+    # distance limit), so the report's method drops specks only when k is below their size.
+    pts, surf, boxes = table_scene
+    rng = np.random.default_rng(1)
+    specks = np.concatenate(
+        [c + rng.normal(0, 0.005, (5, 3)) for c in [[1.8, 0.9, 1.2], [0.1, 0.9, 1.0]]]
+    )
+    allp = np.concatenate([pts, specks])
+    lab = np.concatenate([surf.labels, np.full(len(specks), -1, np.int32)])
+    res = detect_objects(
+        allp,
+        SurfaceResult(surf.surfaces, lab),
+        ObjectParams(method=method, sample_fraction=1.0, k=3),
+    )
+    assert len(res.clusters) == 3
+    assert (res.labels[-len(specks) :] == -1).all()
+    assert res.stats["candidates"] == sum(len(b) for b in boxes) + len(specks)
+
+
+def test_empty_and_degenerate_inputs():
+    table = make_surface(0, 0.0, 0, 1, 0, 1)
+    pts = plane(0, 1, 0, 1, 0.0)
+    for method in ("voxel", "knn"):
+        res = detect_objects(
+            pts, SurfaceResult([table], np.zeros(len(pts), np.int32)), ObjectParams(method=method)
+        )
+        assert res.clusters == [] and (res.labels == -1).all()
+        empty = detect_objects(
+            np.zeros((0, 3)), SurfaceResult([], np.zeros(0, np.int32)), ObjectParams(method=method)
+        )
+        assert empty.clusters == [] and empty.labels.shape == (0,)
+    # A flat patch of object points (a sheet of paper): volume 0, no exception from qhull.
+    paper = plane(0.2, 0.5, 0.2, 0.4, 0.03, 0.01)
+    r = detect_objects(paper, SurfaceResult([table], np.full(len(paper), -1, np.int32)))
+    assert r.clusters[0].volume == 0.0 and r.clusters[0].surface_id == 0
+    # A vertical line of points: collinear footprint.
+    line = np.stack([np.full(40, 0.5), np.full(40, 0.5), np.linspace(0, 0.4, 40)], 1)
+    r = detect_objects(line, SurfaceResult([table], np.full(40, -1, np.int32)))
+    assert r.clusters[0].volume == 0.0 and len(r.clusters[0].footprint) == 1
+
+
+def test_bad_input_raises():
+    with pytest.raises(InputError):
+        detect_objects(np.zeros((4, 2)), SurfaceResult([], np.full(4, -1, np.int32)))
+    with pytest.raises(InputError):
+        detect_objects(np.zeros((4, 3)), SurfaceResult([], np.full(3, -1, np.int32)))
+    bad = np.zeros((4, 3))
+    bad[0, 0] = np.nan
+    with pytest.raises(InputError):
+        detect_objects(bad, SurfaceResult([], np.full(4, -1, np.int32)))
+
+
+def test_object_touching_frame_beside_its_board_is_separate():
+    """A box on a shelf board, 2 cm from the shelf's side panel (which stands on the floor):
+    voxels over different surfaces are not linked, so the box is not swallowed by the frame."""
+    floor = make_surface(0, 0.0, -1.0, 2.0, -1.0, 2.0)
+    board = make_surface(1, 0.4, 0.0, 1.0, 0.0, 0.4)
+    b = box((0.78, 0.1, 0.42), (0.98, 0.3, 0.6))
+    panel = box((1.0 + 1e-6, 0.0, 0.02), (1.02, 0.4, 1.0))
+    pts = np.concatenate([b, panel])
+    res = detect_objects(pts, SurfaceResult([floor, board], np.full(len(pts), -1, np.int32)))
+    assert len(res.clusters) == 2 and res.stats["support_cuts"] > 0
+    on_board = next(c for c in res.clusters if c.surface_id == 1)
+    assert on_board.point_count == len(b)
+    assert on_board.height == pytest.approx(0.2)
