@@ -10,7 +10,9 @@ Steps (all vectorised; loops run over a handful of plane families or planes, nev
    heights (floor, table, shelf boards share the up axis), things resting *on* the planes (the
    floor has everything on its up side), and a sensor looking down on the planes (the floor and
    table tops are below a camera; planes are seen obliquely rather than face-on like a wall
-   ahead). ``GravityParams.up_hint`` overrides the choice when set.
+   ahead). ``GravityParams.up_hint``, when set, is a soft prior: families within 75 deg of it
+   compete (closer ones preferred) and it fixes the sign. For organised camera-frame clouds
+   pass (0, -1, 0): a side wall or cabinet fronts can outscore a small strip of floor.
 5. Refine the axis: principal direction of the inlier normals' outer-product sum, inliers
    re-selected within ``inlier_angle_deg``, a few iterations.
 6. The minimal rotation taking up to +z (Rodrigues), so yaw stays as it was.
@@ -33,7 +35,8 @@ from supportnode.params import GravityParams
 __all__ = ["GravityEstimate", "apply_rotation", "estimate_gravity", "rotation_to_z"]
 
 _K = 20  # neighbours for normals of the downsampled cloud: ~2.5 voxels radius on a plane
-_MAX_CURVATURE = 0.03  # surface variation above this is an edge or clutter, not a plane
+_MAX_CURVATURE = 0.08  # above: edge or clutter. Not lower: a 3 cm slab (a table top with
+# its underside, as mesh sampling gives) measures 0.06 at this scale
 _MIN_FAMILY_FRACTION = 0.05  # a family needs this share of all downsampled normals
 _MAX_FAMILIES = 4
 _MAX_CANDIDATES = 3000  # directions tried as family centres (a random subset of the normals)
@@ -174,12 +177,13 @@ def _planes(t: np.ndarray, bin_size: float, min_count: int) -> list[tuple[float,
     lo = t.min()
     b = np.floor((t - lo) / bin_size).astype(np.int64)
     hist = np.bincount(b)
-    occupied = hist > 0
+    # A few stray members (edges, sloped parts) must not bridge two planes into one run.
+    occupied = hist >= max(2, int(0.002 * t.size))
     # Label runs of consecutive occupied bins (one plane each, however thick the noise).
     starts = occupied & ~np.concatenate([[False], occupied[:-1]])
     run = np.cumsum(starts) - 1
-    run_of_member = run[b]
-    sizes = np.bincount(run_of_member)
+    run_of_member = np.where(occupied[b], run[b], -1)
+    sizes = np.bincount(run_of_member[run_of_member >= 0], minlength=1)
     out = []
     for r in np.flatnonzero(sizes >= min_count):
         m = run_of_member == r
@@ -206,6 +210,12 @@ def _cues(
     below = int((t < -margin).sum())
     above = int((t > margin).sum())
     sensor_vote = (below - above) / max(below + above, 1)
+    if planes:
+        largest = max(planes, key=lambda pm: int(pm[1].sum()))[0]
+        if abs(largest) < margin:
+            # No sensor stands inside its largest plane: the origin is not a sensor here (a
+            # world-frame cloud with the origin on the floor, a mesh sampling). No vote.
+            sensor_vote = 0.0
 
     # Resting cue, for +a as up: points just on the +a side of a plane and over its footprint
     # minus points just on the -a side. Footprints are cells of a 2-D grid in the plane.

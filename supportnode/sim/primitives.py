@@ -29,11 +29,13 @@ Sampler = Callable[[np.random.Generator, int], np.ndarray]
 
 @dataclass(frozen=True)
 class Face:
-    """One face of a shape: its area (m^2), whether it is the top face, and a sampler."""
+    """One face of a shape: its area (m^2), whether it is the top (+z) or bottom (-z) face in
+    the shape frame, and a sampler."""
 
     area: float
     top: bool
     sample: Sampler
+    bottom: bool = False
 
 
 def _quiet(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -146,7 +148,7 @@ class Box:
                     return p
 
                 area = (sx, sy, sz)[u] * (sx, sy, sz)[v]
-                out.append(Face(area, axis == 2 and sign > 0, sample))
+                out.append(Face(area, axis == 2 and sign > 0, sample, bottom=axis == 2 and sign < 0))
         return out
 
 
@@ -189,7 +191,7 @@ class Cylinder:
         return [
             Face(2.0 * np.pi * r * h, False, side),
             Face(disc, True, _disc_sampler(h / 2.0, r)),
-            Face(disc, False, _disc_sampler(-h / 2.0, r)),
+            Face(disc, False, _disc_sampler(-h / 2.0, r), bottom=True),
         ]
 
 
@@ -263,7 +265,7 @@ class Cone:
 
         return [
             Face(np.pi * r * slant, False, side),
-            Face(np.pi * r * r, False, _disc_sampler(-h / 2.0, r)),
+            Face(np.pi * r * r, False, _disc_sampler(-h / 2.0, r), bottom=True),
         ]
 
 

@@ -43,7 +43,7 @@ from supportnode.errors import SceneError
 from supportnode.sim.cloud import ROLE_OBJECT, ROLE_STRUCTURE, ROLE_SURFACE
 from supportnode.sim.primitives import KINDS, Box, Cone, Cylinder, Shape, Sphere
 
-SCENES_DIR = Path(__file__).resolve().parents[2] / "sim_scans" / "scenes"
+SCENES_DIR = Path(__file__).resolve().parent / "scenes"  # shipped inside the package
 ROLES = ("surface", "structure", "object")
 _TOP_KEYS = {"name", "description", "trajectory", "define", "primitives"}
 _COMMON_KEYS = {"kind", "name", "xyz", "rpy", "role", "object", "surface"}
@@ -434,7 +434,7 @@ def parse_scene(text: str, source: str = "<string>", name: str = "scene") -> Sce
 
 
 def bundled_scenes() -> list[str]:
-    """Names of the scenes shipped in sim_scans/scenes/."""
+    """Names of the scenes shipped in supportnode/sim/scenes/."""
     return sorted(p.stem for p in SCENES_DIR.glob("*.yaml"))
 
 

@@ -27,9 +27,15 @@ def _labels(scene: Scene, prim: np.ndarray, top: np.ndarray) -> tuple[np.ndarray
     return role, table["object"][prim], surface
 
 
-def sample_scene(scene: Scene, n_points: int, seed: int = 0) -> SimCloud:
-    """Exactly `n_points` points spread uniformly by area over every face of every primitive
-    (hidden faces included: a mesh sampling, as in the report), world frame, float32 metres.
+def sample_scene(
+    scene: Scene, n_points: int, seed: int = 0, include_bottoms: bool = False
+) -> SimCloud:
+    """Exactly `n_points` points spread uniformly by area over the faces of every primitive (a
+    mesh sampling, as in the report), world frame, float32 metres.
+
+    Faces turned to the ground (the bottom of an object, the underside of the floor slab or a
+    seat) are left out unless `include_bottoms`: no sensor above them sees them, and an object's
+    bottom coincides with the surface it stands on, so no method could tell the two apart.
 
     Points come grouped by primitive and face, in scene order. Memory: the output plus one
     chunk (about 1M points) of temporaries, so tens of millions of points are fine.
@@ -37,7 +43,13 @@ def sample_scene(scene: Scene, n_points: int, seed: int = 0) -> SimCloud:
     if n_points < 0:
         raise ValueError("n_points must be >= 0")
     rng = np.random.default_rng(seed)
-    faces = [(p, f) for p in scene.primitives for f in p.shape.faces()]
+    faces = [
+        (p, f)
+        for p in scene.primitives
+        for f in p.shape.faces()
+        # A bottom face points down in the world when the primitive is not turned over.
+        if include_bottoms or not (f.bottom and p.pose[2, 2] > 0.5)
+    ]
     areas = np.array([f.area for _, f in faces])
     counts = rng.multinomial(n_points, areas / areas.sum())
     table = scene.label_table()

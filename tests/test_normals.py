@@ -1,0 +1,77 @@
+"""k-NN normals: planes, orientation, curvature, the candidate-only vertical filter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from supportnode.errors import InputError
+from supportnode.geometry.normals import estimate_normals, filter_vertical_normals
+
+
+def _plane(rng: np.random.Generator, n: int, normal: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    normal = normal / np.linalg.norm(normal)
+    e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    uv = rng.uniform(-1, 1, (n, 2))
+    return offset + uv[:, :1] * e1 + uv[:, 1:] * e2
+
+
+def test_tilted_plane_normals_and_curvature() -> None:
+    rng = np.random.default_rng(0)
+    n_true = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    # far from the origin: centring on each query point keeps the covariance exact
+    pts = _plane(rng, 5000, n_true, np.array([1e4, -2e4, 50.0]))
+    normals, curvature = estimate_normals(pts, k=20)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-12)
+    assert (normals[:, 2] >= 0).all()  # default orientation: +z
+    assert np.degrees(np.arccos(np.clip(normals @ n_true, -1, 1))).max() < 0.01
+    assert curvature.max() < 1e-6 and normals.dtype == np.float64
+
+
+def test_orientation_toward_viewpoint() -> None:
+    rng = np.random.default_rng(1)
+    pts = _plane(rng, 2000, np.array([1.0, 0, 0]), np.array([2.0, 0, 0]))  # wall at x = 2
+    normals, _ = estimate_normals(pts, k=10, viewpoint=np.zeros(3))
+    np.testing.assert_allclose(normals, np.tile([-1.0, 0, 0], (2000, 1)), atol=1e-9)
+
+
+def test_scatter_has_high_curvature() -> None:
+    pts = np.random.default_rng(2).normal(size=(3000, 3))
+    _, curvature = estimate_normals(pts, k=30)
+    assert np.median(curvature) > 0.15  # isotropic scatter: close to 1/3
+
+
+def test_chunking_matches_one_pass(monkeypatch: pytest.MonkeyPatch) -> None:
+    import supportnode.geometry.normals as mod
+
+    pts = np.random.default_rng(3).normal(size=(2000, 3)) * [1, 1, 0.05]
+    a, ca = estimate_normals(pts, k=15)
+    monkeypatch.setattr(mod, "_CHUNK_VALUES", 15 * 7)  # 7 points per chunk
+    b, cb = estimate_normals(pts, k=15)
+    np.testing.assert_allclose(a, b, atol=1e-12)
+    np.testing.assert_allclose(ca, cb, atol=1e-12)
+
+
+def test_filter_vertical_only_candidates() -> None:
+    rng = np.random.default_rng(4)
+    floor = np.column_stack([rng.uniform(-1, 1, (4000, 2)), np.zeros(4000)])
+    wall = np.column_stack([np.full(2000, 1.5), rng.uniform(-1, 1, 2000), rng.uniform(0, 1, 2000)])
+    pts = np.concatenate([floor, wall])
+    cand = np.ones(6000, dtype=bool)
+    cand[:100] = False  # floor points that are not candidates are never kept
+    keep = filter_vertical_normals(pts, cand, k=20, max_tilt_deg=20.0)
+    assert not keep[:100].any() and keep[100:4000].all() and not keep[4000:].any()
+    assert not filter_vertical_normals(pts, np.zeros(6000, bool)).any()
+
+
+def test_bad_input() -> None:
+    with pytest.raises(InputError, match="shape"):
+        estimate_normals(np.zeros((10, 2)))
+    bad = np.zeros((10, 3))
+    bad[3] = np.nan
+    with pytest.raises(InputError, match="not finite"):
+        estimate_normals(bad)
+    with pytest.raises(InputError, match="candidate_mask"):
+        filter_vertical_normals(np.random.default_rng(0).random((10, 3)), np.ones(9, bool))
