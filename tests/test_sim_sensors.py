@@ -87,10 +87,20 @@ def test_surface_points_only_on_top_faces(small):
     rest = np.isin(cloud.primitive, surface_prims) & (cloud.role != ROLE_SURFACE)
     assert rest.sum() > 100 and (cloud.role[rest] == ROLE_STRUCTURE).all()
     assert (cloud.surface[rest] == -1).all()
-    # Area proportions: the table top is 0.6 m^2 of the scene's total area.
-    areas = sum(f.area for p in small.primitives for f in p.shape.faces())
+    # Area proportions: the table top is 0.6 m^2 of the sampled area (faces turned to the
+    # ground are not sampled).
+    areas = sum(f.area for p in small.primitives for f in p.shape.faces() if not f.bottom)
     share = (cloud.surface == 1).mean()
     assert share == pytest.approx(0.6 / areas, rel=0.05)
+
+
+def test_bottoms_left_out_unless_asked(small):
+    def on_slab_underside(cloud):
+        z = cloud.points[:, 2]
+        return int((z <= z.min() + 1e-6).sum())
+
+    assert on_slab_underside(sample_scene(small, 50_000, seed=2)) <= 2
+    assert on_slab_underside(sample_scene(small, 50_000, seed=2, include_bottoms=True)) > 500
 
 
 def test_sampling_is_deterministic(small):
