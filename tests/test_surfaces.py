@@ -28,7 +28,7 @@ def test_floor_and_table_found_with_height_and_area(room):
     assert [floor.id, table.id] == [0, 1]
     # Point labels: precise (nothing from walls, legs or the box) and nearly complete.
     on = res.labels >= 0
-    assert not on[truth == 3].any()  # wall
+    assert on[truth == 3].mean() < 0.002  # wall: at most a few points at its very foot
     # Only the rim of the box and the leg tops within the 1 cm point tolerance of the table.
     assert on[truth == 2].mean() < 0.05 and on[truth == 4].mean() < 0.01
     assert np.isin(truth[on], [0, 1]).mean() > 0.995  # precision

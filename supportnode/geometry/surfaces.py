@@ -15,9 +15,11 @@ import numpy as np
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.normals import normals_at
 from supportnode.geometry.voxels import (
     OUTER_INDEX,
     KeyIndex,
@@ -102,9 +104,24 @@ def detect_surfaces(points: np.ndarray, params: SurfaceParams | None = None) -> 
         voxel_labels = surface_of_voxel[grid.point_voxel]
         planes = None
     elif params.method == "planar":
+        used = pts if keep is None else pts[keep]
         surface_of_voxel, planes, stats = _grow_planar(grid, params)
-        voxel_labels = _label_points_planar(
-            pts if keep is None else pts[keep], grid, surface_of_voxel, planes, params
+        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
+        absorbed = _absorb_clutter(used, grid, surface_of_voxel, planes, tolerance, params)
+        stats["absorbed_voxels"] = len(absorbed)
+        # Pieces of one board, split by the objects on it, meet once grown around them.
+        sv = np.flatnonzero(surface_of_voxel >= 0)
+        if len(sv):
+            surface_of_voxel[sv] = _connect(
+                grid.keys[sv], planes.mean[sv], planes.normal[sv], params
+            )
+            tolerance = _surface_tolerance(surface_of_voxel, planes, params)
+        # Size limits apply to what a surface became: a board seen between objects is a
+        # narrow strip until it has grown under and around them.
+        stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params)
+        voxel_labels = _label_points_planar(used, grid, surface_of_voxel, planes, tolerance)
+        stats["clutter_points_rejected"] = _reject_tilted_clutter(
+            used, grid, voxel_labels, absorbed[surface_of_voxel[absorbed] >= 0], params
         )
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
@@ -114,6 +131,8 @@ def detect_surfaces(points: np.ndarray, params: SurfaceParams | None = None) -> 
     else:
         labels[keep] = voxel_labels
     surfaces, labels = _summarise(pts, labels, grid, surface_of_voxel, params)
+    if params.method == "planar":
+        surfaces, labels = _drop_small(surfaces, labels, params)
     stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
     if keep is not None:
         stats["normal_filter_removed"] = int(len(pts) - keep.sum())
@@ -205,30 +224,9 @@ def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _P
     )
     cand = dense[ok]
     cplanes = _Planes(planes.mean[ok], planes.normal[ok], planes.roughness[ok])
-    keys = grid.keys[cand]
-    index = KeyIndex.build(keys)
-    src, dst = index.neighbour_pairs(keys, layered_offsets(params.connectivity))
-    # Each voxel's plane, extended to the other voxel's centroid, must meet it within max_step:
-    # a step, a wall top beside a table or a shelf board above another does not join.
-    d = cplanes.mean[dst] - cplanes.mean[src]
-    gap_src = np.abs(np.einsum("ij,ij->i", d, cplanes.normal[src])) / cplanes.normal[src, 2]
-    gap_dst = np.abs(np.einsum("ij,ij->i", d, cplanes.normal[dst])) / cplanes.normal[dst, 2]
-    joined = np.maximum(gap_src, gap_dst) <= params.max_step
-    comp = _components(len(cand), src[joined], dst[joined])
-
-    vx, vy = params.voxel_size[0], params.voxel_size[1]
-    # Footprint cells per component (a column holding two layers of one surface counts once).
-    _, cell_comp = _unique_cells(keys[:, :2], comp)
-    n_cells = np.bincount(cell_comp, minlength=comp.max() + 1 if len(comp) else 0)
-    big = np.flatnonzero(n_cells * vx * vy >= max(params.min_area, 1e-12))
-    keep_comp = np.zeros(len(n_cells), dtype=bool)
-    widths = np.zeros(len(n_cells))
-    for c in big:  # one footprint raster per sizeable component (tens), not per voxel
-        widths[c] = footprint_width(keys[comp == c, :2], (vx, vy))
-        keep_comp[c] = widths[c] >= params.min_width
+    comp = _connect(grid.keys[cand], cplanes.mean, cplanes.normal, params)
     surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
-    good = keep_comp[comp] if len(comp) else np.zeros(0, dtype=bool)
-    surface_of_voxel[cand[good]] = comp[good]
+    surface_of_voxel[cand] = comp
     all_planes = _Planes(
         mean=np.zeros((len(grid.counts), 3)),
         normal=np.zeros((len(grid.counts), 3)),
@@ -240,10 +238,47 @@ def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _P
     stats = {
         "dense_voxels": len(dense),
         "candidate_voxels": len(cand),
-        "components": len(n_cells),
-        "rejected_narrow": int(len(big) - keep_comp.sum()),
+        "components": int(comp.max()) + 1 if len(comp) else 0,
     }
     return surface_of_voxel, all_planes, stats
+
+
+def _connect(
+    keys: np.ndarray, mean: np.ndarray, normal: np.ndarray, params: SurfaceParams
+) -> np.ndarray:
+    """Component of each (M, 3)-keyed voxel: neighbours join when each one's plane, extended
+    to the other's point, meets it within max_step (a step, a wall top beside a table or a
+    shelf board above another does not join)."""
+    index = KeyIndex.build(keys)
+    src, dst = index.neighbour_pairs(keys, layered_offsets(params.connectivity))
+    d = mean[dst] - mean[src]
+    gap_src = np.abs(np.einsum("ij,ij->i", d, normal[src])) / normal[src, 2]
+    gap_dst = np.abs(np.einsum("ij,ij->i", d, normal[dst])) / normal[dst, 2]
+    joined = np.maximum(gap_src, gap_dst) <= params.max_step
+    return _components(len(keys), src[joined], dst[joined])
+
+
+def _filter_components(grid: VoxelGrid, surface_of_voxel: np.ndarray, params: SurfaceParams) -> int:
+    """Drop, in place, components smaller than min_area or narrower than min_width; returns
+    how many were too narrow."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    if len(sv) == 0:
+        return 0
+    comp = surface_of_voxel[sv]
+    keys = grid.keys[sv]
+    vx, vy = params.voxel_size[0], params.voxel_size[1]
+    # Footprint cells per component (a column holding two layers of one surface counts once).
+    _, cell_comp = _unique_cells(keys[:, :2], comp)
+    n_cells = np.bincount(cell_comp, minlength=int(comp.max()) + 1)
+    big = np.flatnonzero(n_cells * vx * vy >= max(params.min_area, 1e-12))
+    keep_comp = np.zeros(len(n_cells), dtype=bool)
+    order = np.argsort(comp, kind="stable")
+    bounds = np.searchsorted(comp[order], np.arange(len(n_cells) + 1))
+    for c in big:  # one footprint raster per sizeable component (tens), not per voxel
+        cells = keys[order[bounds[c] : bounds[c + 1]], :2]
+        keep_comp[c] = footprint_width(cells, (vx, vy)) >= params.min_width
+    surface_of_voxel[sv[~keep_comp[comp]]] = -1
+    return int(len(big) - keep_comp.sum())
 
 
 def _unique_cells(cells: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -283,12 +318,154 @@ def rasterize_cells(cells: np.ndarray, upsample: int = 1, pad: int = 1):
     return img, origin
 
 
+def _surface_tolerance(
+    surface_of_voxel: np.ndarray, planes: _Planes, params: SurfaceParams
+) -> np.ndarray:
+    """Point-to-plane tolerance per surface component, metres: ``point_tolerance``, widened
+    to 3x the median voxel roughness on rough (noisy) surfaces."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    if len(sv) == 0:
+        return np.zeros(0)
+    comp = surface_of_voxel[sv]
+    med = _median_by_group(planes.roughness[sv], comp, int(comp.max()) + 1)
+    return np.maximum(params.point_tolerance, 3.0 * med)
+
+
+def _absorb_clutter(
+    pts: np.ndarray,
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    tolerance: np.ndarray,
+    params: SurfaceParams,
+) -> np.ndarray:
+    """Grow surfaces into the cluttered voxels beside them, in place; returns the voxels added.
+
+    A voxel holding a board and the foot of a lamp, or a floor and a wall's base, fails the
+    flatness test although part of it is the surface. It joins a neighbouring surface voxel
+    when enough of its points lie on that voxel's plane (carried over, not refitted, so growth
+    cannot creep up an object) and they spread over the cell (not one edge line)."""
+    steps = params.absorb_steps
+    if steps <= 0 or not (surface_of_voxel >= 0).any():
+        return np.zeros(0, dtype=np.int64)
+    index = KeyIndex.build(grid.keys)
+    offsets = layered_offsets(8)
+    offsets = np.concatenate([offsets, -offsets])
+    min_spread = 0.25 * np.asarray(params.voxel_size[:2])
+    frontier = np.flatnonzero(surface_of_voxel >= 0)
+    added = []
+    for _ in range(steps):  # a few rings of voxels, each step vectorised
+        src, dst = [], []
+        for off in offsets:
+            j = index.find(grid.keys[frontier] + off)
+            ok = j >= 0
+            src.append(frontier[ok])
+            dst.append(j[ok])
+        src, dst = np.concatenate(src), np.concatenate(dst)
+        free = (surface_of_voxel[dst] < 0) & (grid.counts[dst] > params.p_min)
+        src, dst = src[free], dst[free]
+        if len(src) == 0:
+            break
+        # Every point of each candidate voxel against the plane of the surface voxel beside it.
+        n_pts = grid.counts[dst]
+        first = np.cumsum(n_pts) - n_pts
+        pair_of_point = np.repeat(np.arange(len(dst)), n_pts)
+        rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
+        point = grid.order[np.repeat(grid.starts[dst], n_pts) + rank]
+        normal = planes.normal[src][pair_of_point]
+        offset = pts[point] - planes.mean[src][pair_of_point]
+        dist = np.abs(np.einsum("ij,ij->i", offset, normal)) / normal[:, 2]
+        inlier = dist <= tolerance[surface_of_voxel[src]][pair_of_point]
+        n_in = np.add.reduceat(inlier.astype(np.int64), first)
+        xy = pts[point, :2]
+        lo = np.minimum.reduceat(np.where(inlier[:, None], xy, np.inf), first, axis=0)
+        hi = np.maximum.reduceat(np.where(inlier[:, None], xy, -np.inf), first, axis=0)
+        # The inliers must themselves be a level patch: a ramp crosses a level plane in a
+        # band that would otherwise pass, voxel after voxel along its contour.
+        w = inlier.astype(np.float64)
+        cnt = np.maximum(n_in, 1)[:, None]
+        mean_in = np.add.reduceat(offset * w[:, None], first, axis=0) / cnt
+        second = (
+            np.stack(
+                [np.add.reduceat(offset[:, a] * offset[:, b] * w, first) for a, b in OUTER_INDEX],
+                axis=1,
+            )
+            / cnt
+        )
+        cov = np.empty((len(first), 3, 3))
+        for col, (a, b) in enumerate(OUTER_INDEX):
+            cov[:, a, b] = cov[:, b, a] = second[:, col] - mean_in[:, a] * mean_in[:, b]
+        _, n_in_plane = sym3_eigen(cov)
+        level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
+        good = (
+            (n_in > params.p_min)
+            & (n_in >= params.absorb_min_fraction * n_pts)
+            & np.all(hi - lo >= min_spread, axis=1)
+            & level
+        )
+        if not good.any():
+            break
+        # One surface per voxel: the neighbour explaining most of its points.
+        cand = np.flatnonzero(good)
+        order = np.lexsort((-n_in[cand], dst[cand]))
+        cand = cand[order]
+        keep = np.r_[True, dst[cand][1:] != dst[cand][:-1]]
+        cand = cand[keep]
+        j, s_vox = dst[cand], src[cand]
+        surface_of_voxel[j] = surface_of_voxel[s_vox]
+        planes.mean[j] = planes.mean[s_vox]
+        planes.normal[j] = planes.normal[s_vox]
+        planes.roughness[j] = planes.roughness[s_vox]
+        added.append(j)
+        frontier = j
+    return np.concatenate(added) if added else np.zeros(0, dtype=np.int64)
+
+
+def _reject_tilted_clutter(
+    pts: np.ndarray,
+    grid: VoxelGrid,
+    labels: np.ndarray,
+    absorbed: np.ndarray,
+    params: SurfaceParams,
+) -> int:
+    """Unlabel, in place, surface points of cluttered voxels whose k-NN normal is tilted.
+
+    The report's normal filter, run only where it matters (its own suggested improvement):
+    within the point tolerance of a board lie the foot of the panel behind it and the bottom
+    rim of the objects on it; their neighbourhoods are not level. Returns points unlabelled."""
+    if len(absorbed) == 0:
+        return 0
+    in_absorbed = np.zeros(len(grid.counts), dtype=bool)
+    in_absorbed[absorbed] = True
+    query = np.flatnonzero((labels >= 0) & in_absorbed[grid.point_voxel])
+    if len(query) == 0:
+        return 0
+    # Neighbours come from the cluttered voxels and every voxel around them.
+    index = KeyIndex.build(grid.keys)
+    around = [absorbed]
+    for off in np.concatenate([layered_offsets(8), -layered_offsets(8)]):
+        j = index.find(grid.keys[absorbed] + off)
+        around.append(j[j >= 0])
+    vox = np.unique(np.concatenate(around))
+    n_pts = grid.counts[vox]
+    first = np.cumsum(n_pts) - n_pts
+    rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
+    support = pts[grid.order[np.repeat(grid.starts[vox], n_pts) + rank]]
+    k = min(params.clutter_normal_k, len(support))
+    if k < 3:
+        return 0
+    normal, _ = normals_at(cKDTree(support), support, pts[query], k)
+    tilted = np.abs(normal[:, 2]) < np.cos(np.radians(params.normal_filter_max_tilt_deg))
+    labels[query[tilted]] = -1
+    return int(tilted.sum())
+
+
 def _label_points_planar(
     pts: np.ndarray,
     grid: VoxelGrid,
     surface_of_voxel: np.ndarray,
     planes: _Planes,
-    params: SurfaceParams,
+    tol_by_comp: np.ndarray,
 ) -> np.ndarray:
     """A point is on a surface when it lies within tolerance of the plane of a surface voxel
     in its own column: its own voxel, or the one just below or above (a noisy or
@@ -297,10 +474,6 @@ def _label_points_planar(
     sv = np.flatnonzero(surface_of_voxel >= 0)
     if len(sv) == 0:
         return labels
-    comp = surface_of_voxel[sv]
-    # Tolerance per surface: widened on rough (noisy) surfaces.
-    med = _median_by_group(planes.roughness[sv], comp, int(comp.max()) + 1)
-    tol_by_comp = np.maximum(params.point_tolerance, 3.0 * med)
     index = KeyIndex.build(grid.keys[sv])
     pv = grid.point_voxel
     best = np.full(len(pts), np.inf)
@@ -415,6 +588,21 @@ def _summarise(
     labels = np.full(len(pts), -1, dtype=np.int64)
     labels[on] = new_id[compact]
     return surfaces, labels
+
+
+def _drop_small(
+    surfaces: list[Surface], labels: np.ndarray, params: SurfaceParams
+) -> tuple[list[Surface], np.ndarray]:
+    """The final size test on measured areas and widths (the growth step could only bound
+    them by whole cells); ids stay in largest-first order."""
+    keep = [s for s in surfaces if s.area >= params.min_area and s.width >= params.min_width]
+    if len(keep) == len(surfaces):
+        return surfaces, labels
+    new_id = np.full(len(surfaces) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
+    for i, s in enumerate(keep):
+        new_id[s.id] = i
+        s.id = i
+    return keep, new_id[labels]
 
 
 def _footprint_areas(

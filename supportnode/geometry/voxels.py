@@ -172,13 +172,9 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
     point_voxel[order] = np.cumsum(new) - 1
     vkeys = keys[order[starts]]
     # Column by column: contiguous 1-D arrays keep the gathers and reductions cache-friendly.
-    local = [
-        pts[:, a][order] - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)
-    ]
+    local = [pts[:, a][order] - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)]
     sums = np.stack([np.add.reduceat(c, starts) for c in local], axis=1)
-    outer = np.stack(
-        [np.add.reduceat(local[a] * local[b], starts) for a, b in OUTER_INDEX], axis=1
-    )
+    outer = np.stack([np.add.reduceat(local[a] * local[b], starts) for a, b in OUTER_INDEX], axis=1)
     return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts)
 
 

@@ -104,6 +104,10 @@ class Box:
         return signs * self.half
 
     @_quiet
+    def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
+        """(N,) bool: shape-frame points (N, 3) inside the box grown by eps."""
+        return np.all(np.abs(p) <= self.half + eps, axis=1)
+
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Slab test: entry t (exit t when the origin is inside) and whether it is the +z face."""
         half = self.half
@@ -148,7 +152,9 @@ class Box:
                     return p
 
                 area = (sx, sy, sz)[u] * (sx, sy, sz)[v]
-                out.append(Face(area, axis == 2 and sign > 0, sample, bottom=axis == 2 and sign < 0))
+                out.append(
+                    Face(area, axis == 2 and sign > 0, sample, bottom=axis == 2 and sign < 0)
+                )
         return out
 
 
@@ -165,6 +171,11 @@ class Cylinder:
         return float(np.hypot(self.radius, self.height / 2.0))
 
     @_quiet
+    def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
+        """(N,) bool: shape-frame points (N, 3) inside the cylinder grown by eps."""
+        r2 = p[:, 0] ** 2 + p[:, 1] ** 2
+        return (r2 <= (self.radius + eps) ** 2) & (np.abs(p[:, 2]) <= self.height / 2.0 + eps)
+
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, h2 = self.radius, self.height / 2.0
         a = d[:, 0] ** 2 + d[:, 1] ** 2
@@ -207,6 +218,10 @@ class Sphere:
         return float(self.radius)
 
     @_quiet
+    def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
+        """(N,) bool: shape-frame points (N, 3) inside the sphere grown by eps."""
+        return np.einsum("ij,ij->i", p, p) <= (self.radius + eps) ** 2
+
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         b = np.einsum("ij,ij->i", o, d)
         c = np.einsum("ij,ij->i", o, o) - self.radius**2
@@ -237,6 +252,13 @@ class Cone:
         return float(np.hypot(self.radius, self.height / 2.0))
 
     @_quiet
+    def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
+        """(N,) bool: shape-frame points (N, 3) inside the cone grown by eps (apex at +h/2)."""
+        h = self.height
+        r_at = self.radius * np.clip((h / 2.0 - p[:, 2]) / h, 0.0, 1.0)
+        r = np.sqrt(p[:, 0] ** 2 + p[:, 1] ** 2)
+        return (r <= r_at + eps) & (np.abs(p[:, 2]) <= h / 2.0 + eps)
+
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         h2 = self.height / 2.0
         k2 = (self.radius / self.height) ** 2

@@ -36,6 +36,8 @@ def sample_scene(
     Faces turned to the ground (the bottom of an object, the underside of the floor slab or a
     seat) are left out unless `include_bottoms`: no sensor above them sees them, and an object's
     bottom coincides with the surface it stands on, so no method could tell the two apart.
+    Likewise points inside (or within 1 mm of) another primitive are left out and drawn again:
+    a cabinet top under a worktop, a leg's end inside a table top.
 
     Points come grouped by primitive and face, in scene order. Memory: the output plus one
     chunk (about 1M points) of temporaries, so tens of millions of points are fine.
@@ -50,12 +52,21 @@ def sample_scene(
         # A bottom face points down in the world when the primitive is not turned over.
         if include_bottoms or not (f.bottom and p.pose[2, 2] > 0.5)
     ]
-    areas = np.array([f.area for _, f in faces])
-    counts = rng.multinomial(n_points, areas / areas.sum())
+    # Visible share of each face from a pilot sample (its own seeded stream), so that hidden
+    # area does not take points away from visible area.
+    pilot = np.random.default_rng([seed, 1])
+    visible = np.array(
+        [
+            _visible(scene, prim, _face_points(prim, face, pilot, 4000)).mean()
+            for prim, face in faces
+        ]
+    )
+    areas = np.array([f.area for _, f in faces]) * visible
+    counts = rng.multinomial(n_points, areas / areas.sum()) if areas.sum() > 0 else 0 * areas
     table = scene.label_table()
     out = empty_cloud(n_points)
     start = 0
-    for (prim, face), count in zip(faces, counts, strict=True):
+    for (prim, face), count, share in zip(faces, counts, visible, strict=True):
         i = prim.index
         is_surface = face.top and prim.role == "surface"
         sl = slice(start, start + count)
@@ -63,13 +74,35 @@ def sample_scene(
         out.primitive[sl] = i
         out.object[sl] = prim.object_id
         out.surface[sl] = prim.surface_id if is_surface else -1
-        rot, trans = prim.pose[:3, :3], prim.pose[:3, 3]
-        for lo in range(0, count, _CHUNK):
-            n = min(_CHUNK, count - lo)
-            local = face.sample(rng, n)
-            out.points[start + lo : start + lo + n] = rotate(local, rot) + trans
+        filled = 0
+        while filled < count:  # draw, drop hidden points, draw again for what is missing
+            want = min(_CHUNK, count - filled)
+            pts = _face_points(prim, face, rng, int(want / max(share, 1e-3) * 1.1) + 16)
+            pts = pts[_visible(scene, prim, pts)][:want]
+            out.points[start + filled : start + filled + len(pts)] = pts
+            filled += len(pts)
         start += count
     return out
+
+
+def _face_points(prim, face, rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 3) world points drawn uniformly on one face of a primitive."""
+    return rotate(face.sample(rng, n), prim.pose[:3, :3]) + prim.pose[:3, 3]
+
+
+def _visible(scene: Scene, prim, pts: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+    """(N,) bool: world points of `prim` not inside (nor within eps of) any other primitive."""
+    ok = np.ones(len(pts), dtype=bool)
+    for other in scene.primitives:  # tens of primitives, each test vectorised over points
+        if other.index == prim.index:
+            continue
+        box = other.world_aabb()
+        near = np.flatnonzero(ok & np.all((pts >= box[0] - eps) & (pts <= box[1] + eps), axis=1))
+        if len(near) == 0:
+            continue
+        local = rotate(pts[near] - other.pose[:3, 3], other.pose[:3, :3].T)
+        ok[near[other.shape.contains(local, eps)]] = False
+    return ok
 
 
 def raycast(
