@@ -36,10 +36,18 @@ def main() -> None:
         planar = SurfaceParams(method="planar", voxel_size=voxel)
         t_seed = median_time(lambda p=seed: detect_surfaces(pts, p), args.repeats)
         t_planar = median_time(lambda p=planar: detect_surfaces(pts, p), args.repeats)
-        rows.append([label, n, "x".join(map(str, voxel)), report, t_seed, t_planar,
-                     f"{report / t_planar:.0f}x"])
-    print(table(rows, ["cloud", "points", "voxel m", "report s", "seed s", "planar s",
-                       "speed-up"]))
+        rows.append(
+            [
+                label,
+                n,
+                "x".join(map(str, voxel)),
+                report,
+                t_seed,
+                t_planar,
+                f"{report / t_planar:.0f}x",
+            ]
+        )
+    print(table(rows, ["cloud", "points", "voxel m", "report s", "seed s", "planar s", "speed-up"]))
 
 
 if __name__ == "__main__":

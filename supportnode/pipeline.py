@@ -71,7 +71,8 @@ def detect(
 
     align: estimate the rotation to gravity from normals first (no IMU); raises
     AlignmentError when the cloud shows no horizontal surface. objects: also segment the
-    supported objects and compute free space.
+    supported objects and compute free space. sensor_origin: (3,) sensor position in the input
+    frame when known (planes above it are undersides, not surfaces).
     """
     params = params or DetectParams()
     timings: dict[str, float] = {}
@@ -87,7 +88,11 @@ def detect(
         pts = pts @ rotation.T
         timings["gravity"] = time.perf_counter() - t
     t = time.perf_counter()
-    surfaces = detect_surfaces(pts, params.surfaces)
+    origin = None
+    if sensor_origin is not None:
+        origin = np.asarray(sensor_origin, dtype=np.float64)
+        origin = origin if rotation is None else rotation @ origin
+    surfaces = detect_surfaces(pts, params.surfaces, sensor_origin=origin)
     timings["surfaces"] = time.perf_counter() - t
     object_result = None
     free: list[FreeSpace] = []

@@ -193,3 +193,23 @@ def test_box_on_floor_top_not_surface_but_floor_is(rng):
     box = box_points(rng, (1.0, 1.0, 0.15), (0.2, 0.2, 0.3), 4000)
     res = detect_surfaces(np.vstack([floor, box]))
     assert [round(s.height, 3) for s in res.surfaces] == [0.0]
+
+
+def test_underside_seen_from_below_is_not_a_surface(rng):
+    board = plane_points(rng, 0, 1.0, 0, 0.4, 1.6, 8000)  # a high shelf board
+    floor = plane_points(rng, -1, 2, -1, 2, 0.0, 30000)
+    pts = np.vstack([board, floor])
+    assert len(detect_surfaces(pts).surfaces) == 2  # no sensor given: cannot tell
+    res = detect_surfaces(pts, sensor_origin=np.array([0.5, -1.0, 1.2]))
+    assert [round(s.height, 2) for s in res.surfaces] == [0.0]
+    assert (res.labels[: len(board)] == -1).all()
+
+
+def test_sparse_scan_lines_on_a_ramp_are_not_a_surface():
+    """One lidar ring per voxel on a 15 degree ramp looks level voxel by voxel; the plane fitted
+    to the whole region does not."""
+    x = np.linspace(0, 2.0, 400)
+    rings = []
+    for y in np.arange(0.0, 1.5, 0.11):  # rings 11 cm apart, each along a contour
+        rings.append(np.c_[x, np.full_like(x, y), np.full_like(x, np.tan(np.radians(15)) * y)])
+    assert detect_surfaces(np.vstack(rings), SurfaceParams(max_step=0.04)).surfaces == []

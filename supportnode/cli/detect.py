@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
@@ -26,11 +27,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="rotate the cloud to gravity from its normals first (no IMU; z is not up)",
     )
+    parser.add_argument(
+        "--sensor-origin",
+        metavar="X,Y,Z",
+        type=_xyz,
+        help="sensor position in the cloud's frame, metres: planes above it are undersides",
+    )
     parser.add_argument("--no-objects", action="store_true", help="surfaces only")
     parser.add_argument(
         "--render", action="store_true", help="also draw result.png (needs the viz extra)"
     )
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+
+
+def _xyz(text: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(map(math.isfinite, values)):
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z in metres, got {text!r}")
+    return values  # type: ignore[return-value]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,7 +63,13 @@ def run(args: argparse.Namespace) -> int:
     read_time = time.perf_counter() - t
     name = Path(args.cloud).stem
     out_dir = Path(args.out) if args.out else Path("out") / name
-    detection = detect(cloud.points, params, align=args.align, objects=not args.no_objects)
+    detection = detect(
+        cloud.points,
+        params,
+        align=args.align,
+        objects=not args.no_objects,
+        sensor_origin=args.sensor_origin,
+    )
     detection.timings = {"read": read_time, **detection.timings}
     points = cloud.points if detection.rotation is None else cloud.points @ detection.rotation.T
     t = time.perf_counter()

@@ -24,7 +24,6 @@ from supportnode.geometry.voxels import (
     OUTER_INDEX,
     KeyIndex,
     VoxelGrid,
-    argsort_keys,
     horizontal_offsets,
     layered_offsets,
     voxelize,
@@ -87,10 +86,17 @@ class SurfaceResult:
     stats: dict = field(default_factory=dict)  # counts for diagnostics (voxels, candidates, ...)
 
 
-def detect_surfaces(points: np.ndarray, params: SurfaceParams | None = None) -> SurfaceResult:
+def detect_surfaces(
+    points: np.ndarray,
+    params: SurfaceParams | None = None,
+    sensor_origin: np.ndarray | None = None,
+) -> SurfaceResult:
     """Find support surfaces in a gravity-aligned cloud.
 
-    points: (N, 3) float, metres, z up. Returns surfaces sorted largest first and (N,) labels.
+    points: (N, 3) float, metres, z up. sensor_origin: (3,) sensor position in the same frame
+    when known: a plane at or above the sensor shows it only its underside (a shelf board seen
+    from below), which is no place to put anything. Returns surfaces sorted largest first and
+    (N,) int32 labels.
     """
     params = params or SurfaceParams()
     pts = _check_points(points)
@@ -132,7 +138,7 @@ def detect_surfaces(points: np.ndarray, params: SurfaceParams | None = None) -> 
         labels[keep] = voxel_labels
     surfaces, labels = _summarise(pts, labels, grid, surface_of_voxel, params)
     if params.method == "planar":
-        surfaces, labels = _drop_small(surfaces, labels, params)
+        surfaces, labels = _drop_unfit(surfaces, labels, params, sensor_origin)
     stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
     if keep is not None:
         stats["normal_filter_removed"] = int(len(pts) - keep.sum())
@@ -250,7 +256,22 @@ def _connect(
     to the other's point, meets it within max_step (a step, a wall top beside a table or a
     shelf board above another does not join)."""
     index = KeyIndex.build(keys)
-    src, dst = index.neighbour_pairs(keys, layered_offsets(params.connectivity))
+    offsets = layered_offsets(params.connectivity)
+    if params.bridge_cells > 0:
+        # Sparse scan lines far from a lidar leave empty cells between the rings of a floor.
+        r = params.bridge_cells + 1
+        far = np.array(
+            [
+                (dx, dy, dz)
+                for dx in range(0, r + 1)
+                for dy in range(-r, r + 1)
+                for dz in (-1, 0, 1)
+                if max(abs(dx), abs(dy)) >= 2 and (dx > 0 or dy > 0)
+            ],
+            dtype=np.int64,
+        )
+        offsets = np.concatenate([offsets, far])
+    src, dst = index.neighbour_pairs(keys, offsets)
     d = mean[dst] - mean[src]
     gap_src = np.abs(np.einsum("ij,ij->i", d, normal[src])) / normal[src, 2]
     gap_dst = np.abs(np.einsum("ij,ij->i", d, normal[dst])) / normal[dst, 2]
@@ -366,6 +387,10 @@ def _absorb_clutter(
         src, dst = src[free], dst[free]
         if len(src) == 0:
             break
+        # One trial per (voxel, surface): neighbours on one surface share its plane.
+        pair = dst * (int(surface_of_voxel.max()) + 1) + surface_of_voxel[src]
+        _, first_of_pair = np.unique(pair, return_index=True)
+        src, dst = src[first_of_pair], dst[first_of_pair]
         # Every point of each candidate voxel against the plane of the surface voxel beside it.
         n_pts = grid.counts[dst]
         first = np.cumsum(n_pts) - n_pts
@@ -440,10 +465,12 @@ def _reject_tilted_clutter(
     query = np.flatnonzero((labels >= 0) & in_absorbed[grid.point_voxel])
     if len(query) == 0:
         return 0
-    # Neighbours come from the cluttered voxels and every voxel around them.
+    # Neighbours come from the cluttered voxels, those beside them in their layer (a wall's
+    # foot, an object's rim) and those just above and below.
     index = KeyIndex.build(grid.keys)
     around = [absorbed]
-    for off in np.concatenate([layered_offsets(8), -layered_offsets(8)]):
+    beside = [(dx, dy, 0) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
+    for off in np.array([*beside, (0, 0, 1), (0, 0, -1)], dtype=np.int64):
         j = index.find(grid.keys[absorbed] + off)
         around.append(j[j >= 0])
     vox = np.unique(np.concatenate(around))
@@ -454,7 +481,9 @@ def _reject_tilted_clutter(
     k = min(params.clutter_normal_k, len(support))
     if k < 3:
         return 0
-    normal, _ = normals_at(cKDTree(support), support, pts[query], k)
+    # Thread start-up outweighs the work below ~50k queries.
+    workers = -1 if len(query) > 50_000 else 1
+    normal, _ = normals_at(cKDTree(support), support, pts[query], k, workers=workers)
     tilted = np.abs(normal[:, 2]) < np.cos(np.radians(params.normal_filter_max_tilt_deg))
     labels[query[tilted]] = -1
     return int(tilted.sum())
@@ -475,20 +504,36 @@ def _label_points_planar(
     if len(sv) == 0:
         return labels
     index = KeyIndex.build(grid.keys[sv])
-    pv = grid.point_voxel
+    # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
+    lx, ly, lz = grid.local
+    sorted_labels = np.full(len(pts), -1, dtype=np.int64)
     best = np.full(len(pts), np.inf)
-    for dz in (0, -1, 1):  # three column neighbours, each vectorised over all voxels/points
-        hit_in_sv = index.find(grid.keys + [0, 0, dz])  # per voxel
-        target = np.where(hit_in_sv >= 0, sv[np.maximum(hit_in_sv, 0)], -1)[pv]
-        has = target >= 0
-        t = target[has]
+    for dz in (0, -1, 1):  # three column neighbours, each vectorised over voxels and points
+        hit = index.find(grid.keys + [0, 0, dz])
+        vsel = np.flatnonzero(hit >= 0)
+        if len(vsel) == 0:
+            continue
+        t = sv[hit[vsel]]
+        # The plane of surface voxel t as z = A + bx*lx + by*ly in voxel vsel's local frame.
         n = planes.normal[t]
-        dist = np.abs(np.einsum("ij,ij->i", pts[has] - planes.mean[t], n)) / n[:, 2]
-        s = surface_of_voxel[t]
-        better = (dist <= tol_by_comp[s]) & (dist < best[has])
-        idx = np.flatnonzero(has)[better]
-        labels[idx] = s[better]
-        best[idx] = dist[better]
+        bx, by = -n[:, 0] / n[:, 2], -n[:, 1] / n[:, 2]
+        corner = grid.keys[vsel] * grid.size
+        m = planes.mean[t]
+        a = (m[:, 2] - corner[:, 2]) + bx * (corner[:, 0] - m[:, 0]) + by * (corner[:, 1] - m[:, 1])
+        cnt = grid.counts[vsel]
+        if len(vsel) == len(grid.counts):
+            pos = np.arange(len(pts))
+        else:
+            pos = np.repeat(grid.starts[vsel] - (np.cumsum(cnt) - cnt), cnt) + np.arange(cnt.sum())
+        dist = np.abs(
+            lz[pos]
+            - (np.repeat(a, cnt) + np.repeat(bx, cnt) * lx[pos] + np.repeat(by, cnt) * ly[pos])
+        )
+        surf = np.repeat(surface_of_voxel[t], cnt)
+        better = (dist <= tol_by_comp[surf]) & (dist < best[pos])
+        sorted_labels[pos[better]] = surf[better]
+        best[pos[better]] = dist[better]
+    labels[grid.order] = sorted_labels
     return labels
 
 
@@ -516,49 +561,69 @@ def _summarise(
     params: SurfaceParams,
 ) -> tuple[list[Surface], np.ndarray]:
     """Per-surface properties from its points; surfaces sorted largest first, ids 0.."""
-    on = np.flatnonzero(comp_labels >= 0)
-    if len(on) == 0:
+    on = comp_labels >= 0
+    if not on.any():
         return [], np.full(len(pts), -1, dtype=np.int64)
     present = np.bincount(comp_labels[on])
     comps = np.flatnonzero(present)
     s_count = len(comps)
-    remap = np.full(len(present), -1, dtype=np.int64)
+    remap = np.full(len(present) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
     remap[comps] = np.arange(s_count)
-    compact = remap[comp_labels[on]]
-    # Sort the surface points by (surface, voxel): both groupings become contiguous runs.
-    n_vox = len(grid.counts)
-    key = compact * n_vox + grid.point_voxel[on]
-    order = argsort_keys(key)
-    key = key[order]
-    ps = pts[on[order]]
-    g = compact[order]
-    starts = np.searchsorted(g, np.arange(s_count))
-    counts = np.diff(np.append(starts, len(g)))
-    centroid = np.add.reduceat(ps, starts, axis=0) / counts[:, None]
-    d = ps - np.repeat(centroid, counts, axis=0)
-    prods = np.stack([d[:, a] * d[:, b] for a, b in OUTER_INDEX], axis=1)
-    second = np.add.reduceat(prods, starts, axis=0) / counts[:, None]
+    # Surface points in voxel order (the grid's sort, reused): runs of one (voxel, surface)
+    # are reduced first, contiguously; surfaces are then sums over their runs.
+    in_order = on[grid.order]
+    idx = grid.order[in_order]
+    g = remap[comp_labels[idx]]
+    vox = grid.point_voxel[idx]
+    cut = np.empty(len(idx), dtype=bool)
+    cut[0] = True
+    cut[1:] = (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])
+    run = np.flatnonzero(cut)
+    run_g, run_vox = g[run], vox[run]
+    run_n = np.diff(np.append(run, len(idx)))
+    corner = grid.keys[run_vox] * grid.size
+    local = [c[in_order] for c in grid.local]
+    r_sum = np.stack([np.add.reduceat(c, run) for c in local], axis=1)
+    r_outer = np.stack([np.add.reduceat(local[a] * local[b], run) for a, b in OUTER_INDEX], axis=1)
+    r_min = np.stack([np.minimum.reduceat(c, run) for c in local], axis=1) + corner
+    r_max = np.stack([np.maximum.reduceat(c, run) for c in local], axis=1) + corner
+
+    counts = np.bincount(run_g, weights=run_n, minlength=s_count)
+    abs_sum = r_sum + corner * run_n[:, None]
+    centroid = (
+        np.stack(
+            [np.bincount(run_g, weights=abs_sum[:, a], minlength=s_count) for a in range(3)], axis=1
+        )
+        / counts[:, None]
+    )
+    # Second moments about the surface centroid from each run's corner-relative moments.
+    shift = corner - centroid[run_g]
     cov = np.empty((s_count, 3, 3))
     for col, (a, b) in enumerate(OUTER_INDEX):
-        cov[:, a, b] = cov[:, b, a] = second[:, col]
+        m = (
+            r_outer[:, col]
+            + shift[:, a] * r_sum[:, b]
+            + shift[:, b] * r_sum[:, a]
+            + run_n * shift[:, a] * shift[:, b]
+        )
+        cov[:, a, b] = cov[:, b, a] = np.bincount(run_g, weights=m, minlength=s_count) / counts
     evals, normal = sym3_eigen(cov)
     normal = np.where(normal[:, 2:3] < 0, -normal, normal)
     flatness = np.sqrt(np.maximum(evals[:, 0], 0.0))
-    bmin = np.minimum.reduceat(ps, starts, axis=0)
-    bmax = np.maximum.reduceat(ps, starts, axis=0)
-    bounds = np.append(starts, len(g))
-    height = np.array([np.median(ps[bounds[i] : bounds[i + 1], 2]) for i in range(s_count)])
+    bmin = np.full((s_count, 3), np.inf)
+    bmax = np.full((s_count, 3), -np.inf)
+    np.minimum.at(bmin, run_g, r_min)
+    np.maximum.at(bmax, run_g, r_max)
+    # Height: the median of z, taken over runs weighted by their points (a run is one voxel's
+    # share of a level surface, so its mean z stands for its points to within the roughness).
+    height = _weighted_median(abs_sum[:, 2] / run_n, run_n, run_g, s_count)
+    counts = counts.astype(np.int64)
     vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
-
-    # Per (surface, voxel) runs -> footprint cells with the extent of their points.
-    run = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    run_xy_min = np.minimum.reduceat(ps[:, :2], run, axis=0)
-    run_xy_max = np.maximum.reduceat(ps[:, :2], run, axis=0)
-    run_n = np.diff(np.append(run, len(key)))
-    run_cells = grid.keys[key[run] % n_vox, :2]
+    run_xy_min, run_xy_max = r_min[:, :2], r_max[:, :2]
+    run_cells = grid.keys[run_vox, :2]
     vx, vy = float(params.voxel_size[0]), float(params.voxel_size[1])
     area, cells_of = _footprint_areas(
-        run_cells, g[run], run_xy_min, run_xy_max, run_n, s_count, (vx, vy)
+        run_cells, run_g, run_xy_min, run_xy_max, run_n, s_count, (vx, vy)
     )
 
     rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
@@ -585,17 +650,31 @@ def _summarise(
                 width=footprint_width(cells, (vx, vy)),
             )
         )
-    labels = np.full(len(pts), -1, dtype=np.int64)
-    labels[on] = new_id[compact]
-    return surfaces, labels
+    new_id = np.append(new_id, -1)
+    return surfaces, new_id[remap[comp_labels]]
 
 
-def _drop_small(
-    surfaces: list[Surface], labels: np.ndarray, params: SurfaceParams
+def _drop_unfit(
+    surfaces: list[Surface],
+    labels: np.ndarray,
+    params: SurfaceParams,
+    sensor_origin: np.ndarray | None,
 ) -> tuple[list[Surface], np.ndarray]:
-    """The final size test on measured areas and widths (the growth step could only bound
-    them by whole cells); ids stay in largest-first order."""
-    keep = [s for s in surfaces if s.area >= params.min_area and s.width >= params.min_width]
+    """Final tests on each surface as a whole; ids stay in largest-first order.
+
+    Size on measured areas and widths (growth could only bound them by whole cells); tilt of
+    the plane fitted to all its points (sparse scan lines across a ramp look level voxel by
+    voxel); seen from above when the sensor position is known."""
+    cos_tilt = np.cos(np.radians(params.max_tilt_deg))
+    below = np.inf if sensor_origin is None else float(np.asarray(sensor_origin)[2]) - 0.05
+    keep = [
+        s
+        for s in surfaces
+        if s.area >= params.min_area
+        and s.width >= params.min_width
+        and s.normal[2] >= cos_tilt
+        and s.height < below
+    ]
     if len(keep) == len(surfaces):
         return surfaces, labels
     new_id = np.full(len(surfaces) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
@@ -603,6 +682,21 @@ def _drop_small(
         new_id[s.id] = i
         s.id = i
     return keep, new_id[labels]
+
+
+def _weighted_median(
+    values: np.ndarray, weights: np.ndarray, groups: np.ndarray, n: int
+) -> np.ndarray:
+    """Weighted median of ``values`` within each group 0..n-1."""
+    order = np.lexsort((values, groups))
+    v, w, g = values[order], weights[order].astype(np.float64), groups[order]
+    cum = np.cumsum(w)
+    start = np.searchsorted(g, np.arange(n))
+    end = np.searchsorted(g, np.arange(n), side="right")
+    before = np.where(start > 0, cum[np.maximum(start - 1, 0)], 0.0)
+    half = before + 0.5 * (cum[end - 1] - before)
+    pos = np.searchsorted(cum, half)
+    return v[np.clip(pos, start, end - 1)]
 
 
 def _footprint_areas(

@@ -16,14 +16,17 @@ from supportnode.errors import InputError
 OUTER_INDEX = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
-def argsort_keys(keys: np.ndarray) -> np.ndarray:
-    """Stable argsort of non-negative (N,) integer keys.
+def argsort_keys(keys: np.ndarray, top: int | None = None) -> np.ndarray:
+    """Stable argsort of non-negative (N,) integer keys; ``top``: their maximum, if known.
 
     LSD radix sort in 16-bit digits: numpy's stable sort is a radix sort for 16-bit types,
     several times faster than a comparison sort of int64 on millions of keys."""
     keys = np.asarray(keys)
-    top = int(keys.max()) if len(keys) else 0
-    if top >= 2**48 or (len(keys) and int(keys.min()) < 0):
+    if top is None:
+        if len(keys) and int(keys.min()) < 0:
+            return np.argsort(keys, kind="stable")
+        top = int(keys.max()) if len(keys) else 0
+    if top >= 2**48:
         return np.argsort(keys, kind="stable")
     order = np.argsort((keys & 0xFFFF).astype(np.uint16), kind="stable")
     shift = 16
@@ -110,6 +113,8 @@ class VoxelGrid:
     point_voxel: (N,) int64 voxel index of each input point.
     order: (N,) int64 point indices sorted by voxel; voxel v holds
         ``order[starts[v] : starts[v] + counts[v]]`` (for per-voxel reductions with reduceat).
+    local: three (N,) float64 arrays, x, y, z of the points in ``order`` relative to their
+        voxel's corner, metres (contiguous, for later per-voxel reductions without gathers).
     sums: (M, 3) float64 sum of (p - corner) over the voxel's points, metres.
     outer: (M, 6) float64 sum of products of (p - corner), entries in ``OUTER_INDEX`` order.
     """
@@ -122,6 +127,7 @@ class VoxelGrid:
     outer: np.ndarray
     order: np.ndarray
     starts: np.ndarray
+    local: list[np.ndarray]
 
     @property
     def corners(self) -> np.ndarray:
@@ -150,18 +156,26 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
     pts = np.asarray(points, dtype=np.float64)
     size = np.asarray(size, dtype=np.float64).reshape(3)
     n = len(pts)
-    keys = voxel_keys(pts, size)
     if n == 0:
         e = np.zeros(0, np.int64)
-        return VoxelGrid(size, keys, e, e, np.zeros((0, 3)), np.zeros((0, 6)), e, e)
-    origin = keys.min(axis=0)
-    dims = keys.max(axis=0) - origin + 1
+        f = np.zeros(0)
+        keys = np.zeros((0, 3), np.int64)
+        return VoxelGrid(size, keys, e, e, np.zeros((0, 3)), np.zeros((0, 6)), e, e, [f, f, f])
+    # Column by column: contiguous 1-D arrays keep the arithmetic and gathers cache-friendly.
+    cols = np.ascontiguousarray(pts.T)
+    kcols = [np.floor(cols[a] / size[a]) for a in range(3)]
+    lo = np.array([c.min() for c in kcols])
+    hi = np.array([c.max() for c in kcols])
+    if max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40:
+        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
+    origin = lo.astype(np.int64)
+    dims = (hi - lo).astype(np.int64) + 1
     if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
         raise InputError("voxel grid too large to index (extent / voxel size overflows)")
-    k = keys - origin
-    lin = (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+    k = [kcols[a].astype(np.int64) - origin[a] for a in range(3)]
+    lin = (k[0] * dims[1] + k[1]) * dims[2] + k[2]
     # Sorting is the one O(N log N) step; everything after it is contiguous reductions.
-    order = argsort_keys(lin)
+    order = argsort_keys(lin, top=int(np.prod(dims)) - 1)
     lin_sorted = lin[order]
     new = np.empty(n, dtype=bool)
     new[0] = True
@@ -170,12 +184,12 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
     counts = np.diff(np.append(starts, n))
     point_voxel = np.empty(n, dtype=np.int64)
     point_voxel[order] = np.cumsum(new) - 1
-    vkeys = keys[order[starts]]
-    # Column by column: contiguous 1-D arrays keep the gathers and reductions cache-friendly.
-    local = [pts[:, a][order] - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)]
+    first = order[starts]
+    vkeys = np.stack([k[a][first] + origin[a] for a in range(3)], axis=1)
+    local = [cols[a][order] - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)]
     sums = np.stack([np.add.reduceat(c, starts) for c in local], axis=1)
     outer = np.stack([np.add.reduceat(local[a] * local[b], starts) for a, b in OUTER_INDEX], axis=1)
-    return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts)
+    return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts, local)
 
 
 def horizontal_offsets(connectivity: int) -> np.ndarray:

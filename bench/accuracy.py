@@ -1,0 +1,134 @@
+"""Accuracy against the simulator's ground truth: surfaces, objects, gravity.
+
+Run: python bench/accuracy.py [--points 150000] [--tilts 8]
+Every figure in the README's accuracy table comes from this script (seeds fixed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import table  # noqa: E402
+
+from supportnode.config import load_config  # noqa: E402
+from supportnode.errors import AlignmentError  # noqa: E402
+from supportnode.geometry.gravity import estimate_gravity  # noqa: E402
+from supportnode.pipeline import detect  # noqa: E402
+from supportnode.sim import load_scene  # noqa: E402
+from supportnode.sim.evaluate import evaluate  # noqa: E402
+from supportnode.sim.noise import parse_noise  # noqa: E402
+from supportnode.sim.simulate import sampled, scans  # noqa: E402
+from supportnode.sim.sensors import Lidar  # noqa: E402
+from supportnode.sim.trajectory import poses_for  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+SCENES = ["shelf", "table_chairs", "u_table", "kitchen", "sloped"]
+
+
+def score(cloud, params, sensor_origin=None) -> dict:
+    det = detect(cloud.points.astype(np.float64), params, sensor_origin=sensor_origin)
+    return evaluate(det.surfaces.labels, det.objects.labels, cloud.surface, cloud.object)
+
+
+def row(scene: str, variant: str, ev: dict) -> list:
+    s, o = ev["surfaces"], ev["objects"]
+    n_gt = s["gt_count"]
+    return [
+        scene,
+        variant,
+        f"{s['precision']:.3f}",
+        f"{s['recall']:.3f}",
+        f"{s['mean_iou']:.2f}",
+        f"{s['found']}/{n_gt}",
+        s["spurious"],
+        f"{o['ari']:.2f}",
+        f"{o['found']}/{o['gt_count']}",
+        o["merged"],
+        o["split"],
+    ]
+
+
+def gravity_errors(scene, n_points: int, tilts: int, seed: int = 0) -> tuple[list[float], int]:
+    """Angle between the recovered and true up (deg) over random roll/pitch <= 45, any yaw."""
+    rng = np.random.default_rng(seed)
+    base = sampled(scene, n_points, seed=seed).points.astype(np.float64)
+    errors, failures = [], 0
+    for _ in range(tilts):
+        roll, pitch = rng.uniform(-45, 45, 2)
+        yaw = rng.uniform(-180, 180)
+        rot = _rpy(roll, pitch, yaw)
+        try:
+            est = estimate_gravity(base @ rot.T)
+        except AlignmentError:
+            failures += 1
+            continue
+        true_up = rot @ np.array([0.0, 0.0, 1.0])
+        errors.append(float(np.degrees(np.arccos(np.clip(est.up @ true_up, -1, 1)))))
+    return errors, failures
+
+
+def _rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    r, p, y = np.radians([roll, pitch, yaw])
+    rx = np.array([[1, 0, 0], [0, np.cos(r), -np.sin(r)], [0, np.sin(r), np.cos(r)]])
+    ry = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
+    rz = np.array([[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--points", type=int, default=150_000)
+    parser.add_argument("--tilts", type=int, default=8, help="random tilts per scene for gravity")
+    args = parser.parse_args()
+    default = load_config()
+    noisy = load_config(REPO / "config" / "noisy.yaml")
+    report_noise = parse_noise(["uniform:0.05"])
+    rows, grav_rows = [], []
+    for name in SCENES:
+        scene = load_scene(name)
+        rows.append(row(name, "sampled", score(sampled(scene, args.points, seed=0), default)))
+        rows.append(
+            row(name, "sampled+noise", score(sampled(scene, args.points, 0, report_noise), noisy))
+        )
+        lidar = scans(scene, Lidar.preset("os128"), poses_for(scene, 1), seed=0)[0]
+        rows.append(row(name, "os128 scan", score(lidar, default, lidar.sensor_pose[:3, 3])))
+        errors, failures = gravity_errors(scene, 100_000, args.tilts)
+        grav_rows.append(
+            [
+                name,
+                len(errors) + failures,
+                f"{np.median(errors):.2f}" if errors else "-",
+                f"{np.max(errors):.2f}" if errors else "-",
+                failures,
+            ]
+        )
+    print(
+        table(
+            rows,
+            [
+                "scene",
+                "cloud",
+                "surf P",
+                "surf R",
+                "mean IoU",
+                "surfaces",
+                "spurious",
+                "obj ARI",
+                "objects",
+                "merged",
+                "split",
+            ],
+        )
+    )
+    print()
+    print(table(grav_rows, ["scene", "tilts", "median err deg", "max err deg", "refused"]))
+
+
+if __name__ == "__main__":
+    main()
