@@ -14,18 +14,18 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import table  # noqa: E402
+from common import table
 
-from supportnode.config import load_config  # noqa: E402
-from supportnode.errors import AlignmentError  # noqa: E402
-from supportnode.geometry.gravity import estimate_gravity  # noqa: E402
-from supportnode.pipeline import detect  # noqa: E402
-from supportnode.sim import load_scene  # noqa: E402
-from supportnode.sim.evaluate import evaluate  # noqa: E402
-from supportnode.sim.noise import parse_noise  # noqa: E402
-from supportnode.sim.simulate import sampled, scans  # noqa: E402
-from supportnode.sim.sensors import Lidar  # noqa: E402
-from supportnode.sim.trajectory import poses_for  # noqa: E402
+from supportnode.config import load_config
+from supportnode.errors import AlignmentError
+from supportnode.geometry.gravity import estimate_gravity
+from supportnode.pipeline import detect
+from supportnode.sim import load_scene
+from supportnode.sim.evaluate import evaluate
+from supportnode.sim.noise import parse_noise
+from supportnode.sim.sensors import Lidar
+from supportnode.sim.simulate import sampled, scans
+from supportnode.sim.trajectory import poses_for
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = ["shelf", "table_chairs", "u_table", "kitchen", "sloped"]

@@ -12,10 +12,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import median_time, sampled_scene, table  # noqa: E402
+from common import median_time, sampled_scene, table
 
-from supportnode.geometry.surfaces import detect_surfaces  # noqa: E402
-from supportnode.params import SurfaceParams  # noqa: E402
+from supportnode.geometry.surfaces import detect_surfaces
+from supportnode.params import SurfaceParams
 
 # (label, scene, points, voxel size used by the report, report's time in seconds)
 CASES = [
@@ -34,8 +34,8 @@ def main() -> None:
         pts = sampled_scene(scene, n).points.astype("float64")
         seed = SurfaceParams(method="seed", voxel_size=voxel)
         planar = SurfaceParams(method="planar", voxel_size=voxel)
-        t_seed = median_time(lambda p=seed: detect_surfaces(pts, p), args.repeats)
-        t_planar = median_time(lambda p=planar: detect_surfaces(pts, p), args.repeats)
+        t_seed = median_time(lambda p=seed, x=pts: detect_surfaces(x, p), args.repeats)
+        t_planar = median_time(lambda p=planar, x=pts: detect_surfaces(x, p), args.repeats)
         rows.append(
             [
                 label,
