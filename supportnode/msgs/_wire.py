@@ -1,0 +1,411 @@
+"""Framing shared by every message: ``[topic, header, *buffers]``, and the checks behind decoding.
+
+The header is a msgpack map; each buffer is the raw little-endian bytes of one array whose name,
+dtype string and shape the header's ``buffers`` list gives, in frame order. Everything here is
+pure (no sockets): frames in, validated header and zero-copy array views out, or one
+`ProtocolError` naming the topic and the problem. See docs/protocol.md for the specification.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any, NoReturn
+
+import msgpack
+import numpy as np
+
+from supportnode.errors import ConfigError, ProtocolError
+
+__all__ = [
+    "DTYPES",
+    "FLOAT_DTYPES",
+    "MESSAGE_TYPE_NAMES",
+    "SCHEMA_VERSION",
+    "BufferSpec",
+    "Check",
+    "Header",
+    "Limits",
+    "encode_frames",
+    "parse_frames",
+    "short",
+]
+
+#: Schema version this node reads and writes (the header's ``version``).
+SCHEMA_VERSION = 1
+#: Names of the message types (the header's ``type``).
+MESSAGE_TYPE_NAMES = ("PointCloud", "SupportSurfaces", "ObstacleClusters", "Diagnostics")
+#: Accepted dtype strings: numpy's own spelling of little-endian numbers. Object, structured,
+#: bool, complex, half, datetime and big-endian dtypes are rejected; matching whole strings
+#: (never calling ``np.dtype`` on a received string) keeps hostile dtype specs out of numpy.
+DTYPES = frozenset({"<f4", "<f8", "|u1", "|i1", "<u2", "<i2", "<u4", "<i4", "<u8", "<i8"})
+FLOAT_DTYPES = frozenset({"<f4", "<f8"})
+#: Longest topic, bytes (ZeroMQ allows more; nothing sane needs it).
+MAX_TOPIC_BYTES = 255
+#: Most dimensions of one buffer.
+MAX_NDIM = 4
+# Buffer and field names: C identifiers, so a C++ or ROS bridge can use them as member names.
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}\Z")
+# seq is a uint64 on the wire.
+_UINT64_MAX = (1 << 64) - 1
+INT64_MIN, INT64_MAX = -(1 << 63), (1 << 63) - 1
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Size limits of decoded messages; anything larger is rejected before arrays are made.
+
+    Defaults fit 131,072-point lidar scans (and 30 of them merged) comfortably.
+    """
+
+    max_points: int = 4_000_000  # points of a PointCloud, or subsampled points of all clusters
+    max_header_bytes: int = 1 << 20  # msgpack header frame, bytes
+    max_buffers: int = 64  # buffer frames after the header
+    max_surfaces: int = 10_000  # surfaces in one SupportSurfaces
+    max_clusters: int = 100_000  # clusters in one ObstacleClusters
+    max_polygon_vertices: int = 1_000_000  # outline vertices (and rings) of one SupportSurfaces
+    max_message_bytes: int = 256 << 20  # all frames together, bytes
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"Limits.{f.name} must be a positive integer, got {value!r}")
+
+
+@dataclass(frozen=True)
+class BufferSpec:
+    """Layout of one buffer frame: name, dtype string (e.g. '<f4') and shape."""
+
+    name: str
+    dtype: str
+    shape: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Header:
+    """The validated common part of a message header (what `peek_header` returns).
+
+    ``raw`` is the whole decoded msgpack map, type-specific keys included (not yet validated).
+    """
+
+    topic: str
+    type: str
+    version: int
+    stamp: float  # seconds
+    frame_id: str
+    seq: int
+    buffers: tuple[BufferSpec, ...]
+    raw: dict[str, Any]
+
+
+class Check:
+    """Raises one-line ProtocolErrors that name the topic; type checks of header values."""
+
+    def __init__(self, topic: str, prefix: str = "") -> None:
+        self.topic = topic
+        self.prefix = prefix  # "cannot encode: " when checking a message before sending it
+
+    def fail(self, problem: str) -> NoReturn:
+        raise ProtocolError(f"topic {self.topic!r}: {self.prefix}{problem}")
+
+    def key(self, m: Mapping[str, Any], key: str, path: str = "header") -> Any:
+        """``m[key]``, or a failure naming the missing key."""
+        if key not in m:
+            self.fail(f"{path} has no key '{key}'")
+        return m[key]
+
+    def as_map(self, v: Any, what: str) -> dict[str, Any]:
+        if not isinstance(v, dict):
+            self.fail(f"{what} must be a map, got {_tname(v)}")
+        for k in v:
+            if not isinstance(k, str):
+                self.fail(f"{what} has a non-string key {short(k)}")
+        return v
+
+    def as_str(self, v: Any, what: str) -> str:
+        if not isinstance(v, str):
+            self.fail(f"{what} must be a string, got {_tname(v)}")
+        return v
+
+    def as_int(self, v: Any, what: str, lo: int = INT64_MIN, hi: int = INT64_MAX) -> int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            self.fail(f"{what} must be an integer, got {_tname(v)}")
+        if not lo <= v <= hi:
+            self.fail(f"{what} = {v} is out of range [{lo}, {hi}]")
+        return v
+
+    def as_float(self, v: Any, what: str, lo: float = -math.inf) -> float:
+        """A finite number (msgpack float or int) >= lo."""
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(f"{what} must be a number, got {_tname(v)}")
+        try:
+            x = float(v)
+        except OverflowError:  # a msgpack uint64 cannot overflow, but be safe
+            self.fail(f"{what} is out of range")
+        if not math.isfinite(x):
+            self.fail(f"{what} is {x} (must be finite)")
+        if x < lo:
+            self.fail(f"{what} = {x} must be >= {lo}")
+        return x
+
+    def as_vector(self, v: Any, what: str, n: int) -> np.ndarray:
+        """A list of ``n`` finite numbers -> (n,) float64."""
+        if not isinstance(v, list) or len(v) != n:
+            got = f"{len(v)} items" if isinstance(v, list) else _tname(v)
+            self.fail(f"{what} must be a list of {n} numbers, got {got}")
+        return np.array([self.as_float(x, f"{what}[{i}]") for i, x in enumerate(v)])
+
+    def unit_quaternion(self, v: Any, what: str) -> np.ndarray:
+        q = self.as_vector(v, what, 4)
+        with np.errstate(over="ignore"):  # 1e308 components: norm inf, rejected below
+            norm = float(np.linalg.norm(q))
+        if abs(norm - 1.0) > 1e-3:
+            self.fail(f"{what} has norm {norm:.6g} (must be a unit quaternion x, y, z, w)")
+        return q
+
+    def array(
+        self,
+        buffers: Mapping[str, np.ndarray],
+        name: str,
+        dtypes: frozenset[str],
+        tail: tuple[int, ...] = (),
+    ) -> np.ndarray:
+        """Buffer ``name`` with a dtype from ``dtypes`` and shape (n, *tail)."""
+        if name not in buffers:
+            self.fail(f"missing buffer '{name}'")
+        a = buffers[name]
+        if a.dtype.str not in dtypes:
+            self.fail(f"buffer '{name}' has dtype '{a.dtype.str}', expected {_alts(dtypes)}")
+        if a.ndim != 1 + len(tail) or a.shape[1:] != tail:
+            want = "(n" + "".join(f", {t}" for t in tail) + (",)" if not tail else ")")
+            self.fail(f"buffer '{name}' has shape {a.shape}, expected {want}")
+        return a
+
+    def length(self, a: np.ndarray, name: str, n: int, of: str) -> None:
+        if len(a) != n:
+            self.fail(f"buffer '{name}' has {len(a)} rows, expected {n} ({of})")
+
+    def finite(self, a: np.ndarray, name: str) -> None:
+        if a.dtype.kind == "f":
+            bad = int(np.count_nonzero(~np.isfinite(a)))
+            if bad:
+                self.fail(f"{bad} NaN/Inf values in {name}")
+
+    def offsets(self, a: np.ndarray, name: str, items: int, total: int) -> None:
+        """CSR offsets: (items + 1,) from 0 to ``total``, non-decreasing."""
+        self.length(a, name, items + 1, "one more than the items it splits")
+        # Bounds first: differences of arbitrary int64 values could wrap around.
+        if a[0] != 0 or a[-1] != total or bool(np.any(a < 0)) or bool(np.any(a > total)):
+            self.fail(f"buffer '{name}' must run from 0 to {total}")
+        if bool(np.any(np.diff(a) < 0)):
+            self.fail(f"buffer '{name}' must be non-decreasing")
+
+
+def _tname(v: Any) -> str:
+    return "nil" if v is None else type(v).__name__
+
+
+def short(v: Any) -> str:
+    r = repr(v)
+    return r if len(r) <= 40 else r[:37] + "..."
+
+
+def _alts(dtypes: frozenset[str]) -> str:
+    return " or ".join(f"'{d}'" for d in sorted(dtypes))
+
+
+def _topic_name(raw: bytes) -> str:
+    # Undecodable topics are still named, readably, in the error.
+    return raw[:64].decode("utf-8", "replace")
+
+
+def _views(frames: Any) -> list[memoryview]:
+    if isinstance(frames, (bytes, bytearray, memoryview, str)) or not isinstance(frames, Sequence):
+        raise ProtocolError(f"topic ?: message must be a list of frames, got {_tname(frames)}")
+    if len(frames) < 2:
+        name = "?"
+        if frames:
+            try:
+                name = _topic_name(bytes(memoryview(frames[0])))
+            except TypeError:
+                pass
+        raise ProtocolError(
+            f"topic {name!r}: message has {len(frames)} frame(s), expected [topic, header, *buffers]"
+        )
+    views = []
+    for i, f in enumerate(frames):
+        try:
+            mv = memoryview(f)
+        except TypeError:
+            raise ProtocolError(f"topic ?: frame {i} is a {_tname(f)}, not bytes") from None
+        if not mv.c_contiguous:
+            raise ProtocolError(f"topic ?: frame {i} is not contiguous memory")
+        # Byte view of any buffer format; a zero-size view cannot be cast, and needs no cast.
+        views.append(mv.cast("B") if mv.nbytes else memoryview(b""))
+    return views
+
+
+def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndarray]]:
+    """Validate the framing, the common header keys and every buffer's size against the header.
+
+    Returns the header and the buffers as read-only zero-copy arrays (dtype and shape from the
+    header), by name. Type-specific keys and buffer contents are the message classes' job.
+    """
+    views = _views(frames)
+    raw_topic = bytes(views[0])
+    if len(raw_topic) > MAX_TOPIC_BYTES:
+        raise ProtocolError(
+            f"topic {_topic_name(raw_topic)!r}: topic has {len(raw_topic)} bytes "
+            f"(at most {MAX_TOPIC_BYTES})"
+        )
+    try:
+        topic = raw_topic.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ProtocolError(f"topic {_topic_name(raw_topic)!r}: topic is not UTF-8") from None
+    chk = Check(topic)
+    total = sum(v.nbytes for v in views)
+    if total > limits.max_message_bytes:
+        chk.fail(f"message has {total} bytes, exceeds max_message_bytes {limits.max_message_bytes}")
+    if len(views) - 2 > limits.max_buffers:
+        chk.fail(f"{len(views) - 2} buffer frames exceed max_buffers {limits.max_buffers}")
+    hb = views[1]
+    if hb.nbytes > limits.max_header_bytes:
+        chk.fail(
+            f"header has {hb.nbytes} bytes, exceeds max_header_bytes {limits.max_header_bytes}"
+        )
+    n = max(hb.nbytes, 1)
+    try:
+        # Every container and string is bounded by the header's own size, extension types
+        # (timestamps, custom) are refused; the C unpacker bounds nesting depth itself.
+        header = msgpack.unpackb(
+            hb,
+            raw=False,
+            strict_map_key=True,
+            use_list=True,
+            max_str_len=n,
+            max_bin_len=n,
+            max_array_len=n,
+            max_map_len=n,
+            max_ext_len=0,
+        )
+    except Exception as err:  # msgpack raises ValueError subclasses, UnicodeDecodeError, ...
+        chk.fail(f"header is not valid msgpack ({type(err).__name__}: {short(str(err))})")
+    if not isinstance(header, dict):
+        chk.fail(f"header must be a msgpack map, got {_tname(header)}")
+    header = chk.as_map(header, "header")
+    type_name = chk.as_str(chk.key(header, "type"), "header key 'type'")
+    version = chk.as_int(chk.key(header, "version"), "header key 'version'")
+    if version != SCHEMA_VERSION:
+        chk.fail(f"unsupported schema version {version} (this node speaks {SCHEMA_VERSION})")
+    if type_name not in MESSAGE_TYPE_NAMES:
+        chk.fail(f"unknown message type {short(type_name)}")
+    stamp = chk.as_float(chk.key(header, "stamp"), "header key 'stamp'")
+    frame_id = chk.as_str(chk.key(header, "frame_id"), "header key 'frame_id'")
+    seq = chk.as_int(chk.key(header, "seq"), "header key 'seq'", 0, _UINT64_MAX)
+    specs = _buffer_specs(chk, chk.key(header, "buffers"), len(views) - 2)
+    arrays: dict[str, np.ndarray] = {}
+    for spec, view in zip(specs, views[2:], strict=True):
+        itemsize = int(spec.dtype[2:])
+        want = math.prod(spec.shape) * itemsize  # Python ints: no overflow on hostile shapes
+        if view.nbytes != want:
+            chk.fail(
+                f"buffer '{spec.name}' has {view.nbytes} bytes, header says "
+                f"{spec.shape} '{spec.dtype}' = {want}"
+            )
+        # Zero-copy: the array views the received frame (read-only when the frame is bytes).
+        arrays[spec.name] = np.frombuffer(view, dtype=np.dtype(spec.dtype)).reshape(spec.shape)
+    hdr = Header(topic, type_name, version, stamp, frame_id, seq, tuple(specs), header)
+    return hdr, arrays
+
+
+def _buffer_specs(chk: Check, value: Any, frames: int) -> list[BufferSpec]:
+    if not isinstance(value, list):
+        chk.fail(f"header key 'buffers' must be a list, got {_tname(value)}")
+    if len(value) != frames:
+        chk.fail(f"header lists {len(value)} buffers, message has {frames} buffer frames")
+    specs: list[BufferSpec] = []
+    seen: set[str] = set()
+    for i, item in enumerate(value):
+        what = f"buffers[{i}]"
+        m = chk.as_map(item, what)
+        name = chk.as_str(chk.key(m, "name", what), f"{what}.name")
+        if not _NAME.match(name):
+            chk.fail(f"{what}.name {short(name)} is not an identifier of at most 64 characters")
+        if name in seen:
+            chk.fail(f"buffer '{name}' appears twice")
+        seen.add(name)
+        dtype = chk.as_str(chk.key(m, "dtype", what), f"buffer '{name}' dtype")
+        if dtype not in DTYPES:
+            chk.fail(
+                f"buffer '{name}' has unsupported dtype {short(dtype)} (allowed: {_alts(DTYPES)})"
+            )
+        shape = chk.key(m, "shape", what)
+        if not isinstance(shape, list) or not 1 <= len(shape) <= MAX_NDIM:
+            chk.fail(f"buffer '{name}' shape must be a list of 1 to {MAX_NDIM} integers")
+        dims = tuple(chk.as_int(d, f"buffer '{name}' shape[{j}]", 0) for j, d in enumerate(shape))
+        specs.append(BufferSpec(name, dtype, dims))
+    return specs
+
+
+def little_endian(a: np.ndarray) -> np.ndarray:
+    """C-contiguous little-endian ``a``, a copy only when it is not already that."""
+    a = np.ascontiguousarray(a)
+    order = a.dtype.byteorder
+    if order == ">" or (order == "=" and sys.byteorder == "big"):
+        a = a.astype(a.dtype.newbyteorder("<"))
+    return a
+
+
+def encode_frames(
+    topic: str | bytes,
+    type_name: str,
+    stamp: float,
+    frame_id: str,
+    seq: int,
+    arrays: Sequence[tuple[str, np.ndarray]],
+    extra: Mapping[str, Any] | None = None,
+) -> list[bytes | memoryview]:
+    """``[topic, header, *buffers]`` with the arrays as zero-copy memoryviews where possible.
+
+    ``extra``: type-specific header keys (plain msgpack-able Python values).
+    """
+    topic_b = topic.encode("utf-8") if isinstance(topic, str) else bytes(topic)
+    chk = Check(_topic_name(topic_b))
+    if not math.isfinite(stamp):
+        chk.fail(f"cannot encode: stamp is {stamp} (must be finite)")
+    if isinstance(seq, bool) or not 0 <= int(seq) <= _UINT64_MAX:
+        chk.fail(f"cannot encode: seq {seq!r} is not a uint64")
+    if not isinstance(frame_id, str):
+        chk.fail(f"cannot encode: frame_id must be a string, got {_tname(frame_id)}")
+    specs, bufs = [], []
+    for name, a in arrays:
+        if not isinstance(name, str) or not _NAME.match(name):
+            chk.fail(
+                f"cannot encode buffer {short(name)}: not an identifier of at most 64 characters"
+            )
+        a = little_endian(np.asarray(a))
+        if a.dtype.str not in DTYPES:
+            chk.fail(
+                f"cannot encode buffer '{name}' of dtype {a.dtype.str!r} (allowed: {_alts(DTYPES)})"
+            )
+        specs.append({"name": name, "dtype": a.dtype.str, "shape": list(a.shape)})
+        bufs.append(memoryview(a))  # type: ignore[arg-type]  # numpy stubs lack Buffer
+    header: dict[str, Any] = {
+        "type": type_name,
+        "version": SCHEMA_VERSION,
+        "stamp": float(stamp),
+        "frame_id": frame_id,
+        "seq": int(seq),
+        "buffers": specs,
+    }
+    header.update(extra or {})
+    return [topic_b, msgpack.packb(header, use_bin_type=True), *bufs]
+
+
+def expect_type(chk: Check, header: Header, type_name: str) -> None:
+    if header.type != type_name:
+        chk.fail(f"expected a {type_name} message, got {header.type}")
