@@ -531,7 +531,13 @@ def _yaml_scalar(value: Any) -> str:
         plain = re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-./]*", value) is not None
         if plain and yaml.safe_load(value) == value:
             return value
-        return json.dumps(value)  # a JSON string is a valid double-quoted YAML scalar
+        # A double-quoted YAML scalar; characters beyond the BMP as \U escapes (JSON would
+        # write surrogate pairs, which YAML reads back as two characters).
+        quoted = json.dumps(value, ensure_ascii=False)
+        return "".join(
+            f"\\U{ord(ch):08x}" if ord(ch) > 0xFFFF or not (ch.isprintable() or ch in '\\"') else ch
+            for ch in quoted
+        )
     raise TypeError(f"cannot write {type(value).__name__} {value!r} as a configuration scalar")
 
 

@@ -69,6 +69,23 @@ class SurfaceParams:
         "m",
         min=0.0,
     )
+    bridge_cells: int = param(
+        1, "planar: empty cells a surface may span between level voxels of the same plane "
+        "(gaps between a lidar's rings far away); 0: only adjacent voxels join", min=0, max=5,
+    )
+    absorb_steps: int = param(
+        3, "planar: rings of cluttered voxels (a board's edge by a panel, the foot of an "
+        "object) a surface may grow into when part of their points lie on its plane", min=0,
+        max=50,
+    )
+    absorb_min_fraction: float = param(
+        0.2, "planar: share of a cluttered voxel's points that must lie on the plane for it "
+        "to join", min=0.0, max=1.0,
+    )
+    clutter_normal_k: int = param(
+        10, "planar: neighbours for the normals that vet surface points in cluttered voxels "
+        "(tilted by more than normal_filter_max_tilt_deg: not on the surface)", min=3, max=100,
+    )
     normal_filter: bool = param(
         False,
         "the report's option: drop points whose k-NN normal is not vertical before "
@@ -161,3 +178,75 @@ class DetectParams:
     freespace: FreeSpaceParams = field(default_factory=FreeSpaceParams)
     normals: NormalParams = field(default_factory=NormalParams)
     gravity: GravityParams = field(default_factory=GravityParams)
+    # A lambda because NodeParams is defined below (appended sections keep this file's order).
+    node: NodeParams = field(default_factory=lambda: NodeParams())
+
+
+@dataclass(frozen=True)
+class MapParams:
+    """The node's incremental voxel map: posed scans merged, aged, cropped around the sensor."""
+
+    radius: float = param(
+        20.0, "keep only voxels within this horizontal distance of the sensor", "m", min=0.1
+    )
+    max_age: float = param(
+        10.0, "forget voxels not seen for this long (0: never by age)", "s", min=0.0
+    )
+    max_voxels: int = param(
+        2_000_000, "cap on stored voxels; the oldest go first beyond it", min=1000
+    )
+    voxel_size: float = param(0.05, "edge of the map's voxels", "m", min=1e-3, max=1.0)
+    clear_free_space: bool = param(
+        True, "erase voxels that a new ray passes through (moved or removed objects)"
+    )
+
+
+@dataclass(frozen=True)
+class NodeParams:
+    """The ZeroMQ node: endpoints, topics, rates, input limits and its map.
+
+    Endpoints are ZeroMQ addresses (tcp://host:port, ipc://path, inproc://name). Like a ROS
+    topic fed by a sensor driver, the driver (or replay) binds its PUB socket and the node
+    connects to it (scan_bind: false); the node binds the PUB socket its results go out on, and
+    planners connect to it.
+    """
+
+    name: str = param("supportnode", "node name used in logs and diagnostics")
+    scan_endpoint: str = param(
+        "tcp://127.0.0.1:5555", "where the node subscribes to scans (a driver's PUB socket)"
+    )
+    scan_bind: bool = param(
+        False, "bind the scan socket instead of connecting (when drivers connect to the node)"
+    )
+    scan_topic: str = param("scan", "topic of incoming PointCloud messages")
+    pub_endpoint: str = param(
+        "tcp://127.0.0.1:5556", "where the node publishes results (planners connect here)"
+    )
+    pub_bind: bool = param(True, "bind the result socket (false: connect to a forwarder)")
+    surfaces_topic: str = param("surfaces", "topic of outgoing SupportSurfaces messages")
+    obstacles_topic: str = param("obstacles", "topic of outgoing ObstacleClusters messages")
+    diagnostics_topic: str = param("diagnostics", "topic of outgoing Diagnostics messages")
+    detection_rate: float = param(
+        0.0,
+        "largest detection rate; scans in between only update the map (0: every scan)",
+        "Hz",
+        min=0.0,
+        max=1000.0,
+    )
+    diagnostics_period: float = param(
+        1.0, "time between Diagnostics messages", "s", min=0.01, max=3600.0
+    )
+    max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
+    max_message_bytes: int = param(
+        64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024
+    )
+    queue: int = param(
+        1,
+        "scans kept when detection falls behind, newest first (1: newest only)",
+        min=1,
+        max=1000,
+    )
+    reject_log_period: float = param(
+        5.0, "at most one log line per this period about rejected messages", "s", min=0.0
+    )
+    map: MapParams = field(default_factory=MapParams)

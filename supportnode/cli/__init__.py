@@ -17,22 +17,29 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "detect": ("supportnode.cli.detect", "find support surfaces and objects in one cloud file"),
     "sim": ("supportnode.cli.sim", "simulate scenes with ground truth (sampled, lidar, camera)"),
     "eval": ("supportnode.cli.evaluate", "score a detect output against simulator ground truth"),
+    "render": ("supportnode.cli.render", "draw a detection result as a PNG"),
+    "launch": ("supportnode.cli.launch", "start a launch file's processes, stop them in order"),
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser; only ``command``'s module is imported (for its arguments), so one
+    command's optional dependencies never stand in the way of another."""
     parser = argparse.ArgumentParser(prog="supportnode", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"supportnode {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module_name, help_text) in COMMANDS.items():
         sp = sub.add_parser(name, help=help_text, description=help_text)
         sp.set_defaults(_module=module_name)
-        importlib.import_module(module_name).add_arguments(sp)
+        if name == command:
+            importlib.import_module(module_name).add_arguments(sp)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help()

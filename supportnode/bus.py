@@ -1,0 +1,279 @@
+"""Thin ZeroMQ publish/subscribe helpers: topics, keep-newest input, clear endpoint errors.
+
+A message is a list of frames ``[topic, *payload]`` (what `supportnode.msgs` encodes); this module
+knows nothing of what the payload means. Sockets close with linger 0, so closing never blocks on
+undelivered messages. Both classes are context managers and share ``zmq.Context.instance()``
+unless given a context, which lets ``inproc://`` endpoints reach each other within a process.
+
+Endpoints are ``tcp://host:port`` (``tcp://127.0.0.1:*`` binds a free port; read it back from
+``.endpoint``), ``ipc://path`` or ``inproc://name``. Which side binds is a deployment choice; the
+convention here is ROS-like: whoever produces a stream that others follow (a sensor driver, the
+node's results) binds, and consumers connect.
+
+Sensor-data semantics: a `Subscriber` keeps only the newest ``keep_newest`` messages when its
+consumer falls behind. ZMQ_CONFLATE cannot do this for multipart messages (it keeps one *frame*),
+so the receive queue is kept small (RCVHWM) and every `Subscriber.recv` first drains all that
+has arrived, keeping the newest and counting the rest in ``dropped``.
+"""
+
+from __future__ import annotations
+
+import collections
+import errno
+import time
+from collections.abc import Sequence
+from types import TracebackType
+from typing import TypeAlias
+
+import zmq
+
+from supportnode.errors import SupportNodeError
+
+__all__ = ["BusError", "Frames", "Publisher", "Subscriber", "check_endpoint"]
+
+#: One multipart message: ``[topic, *payload]``. Received payload frames are zero-copy views.
+Frames: TypeAlias = "list[bytes | memoryview]"
+
+_SCHEMES = ("tcp://", "ipc://", "inproc://")
+# Upper bound of messages drained in one recv: a publisher faster than draining must not keep a
+# consumer in the drain loop forever.
+_MAX_DRAIN = 10_000
+# How long a drain that emptied a full receive queue waits for ZeroMQ to refill it.
+_REFILL_WAIT_MS = 5
+
+
+class BusError(SupportNodeError):
+    """A socket cannot bind or connect to an endpoint (bad address, address in use)."""
+
+
+def check_endpoint(endpoint: str) -> str:
+    """``endpoint`` unchanged if it is a tcp://, ipc:// or inproc:// address, else a BusError."""
+    if not isinstance(endpoint, str) or not endpoint.startswith(_SCHEMES):
+        raise BusError(
+            f"{endpoint!r}: unsupported endpoint (expected tcp://host:port, ipc://path "
+            "or inproc://name)"
+        )
+    if endpoint.startswith("tcp://") and ":" not in endpoint[len("tcp://") :]:
+        raise BusError(f"{endpoint}: tcp endpoint without a port (expected tcp://host:port)")
+    return endpoint
+
+
+def _attach(sock: zmq.Socket, endpoint: str, bind: bool) -> str:
+    """Bind or connect ``sock``; returns the resolved endpoint (the actual port for ``:*``)."""
+    check_endpoint(endpoint)
+    try:
+        if bind:
+            sock.bind(endpoint)
+            return str(sock.getsockopt_string(zmq.LAST_ENDPOINT)) or endpoint
+        sock.connect(endpoint)
+        return endpoint
+    except zmq.ZMQError as err:
+        verb = "bind" if bind else "connect"
+        if err.errno == errno.EADDRINUSE:
+            raise BusError(f"{endpoint}: address already in use") from err
+        if err.errno == errno.EADDRNOTAVAIL:
+            raise BusError(f"{endpoint}: cannot {verb}: no such local address") from err
+        if err.errno == errno.EACCES:
+            raise BusError(f"{endpoint}: cannot {verb}: permission denied") from err
+        raise BusError(f"{endpoint}: cannot {verb} ({err.strerror})") from err
+
+
+class _Socket:
+    """Shared life cycle: one socket, linger 0, closed by `close` or leaving a ``with`` block."""
+
+    def __init__(self, kind: int, context: zmq.Context | None) -> None:
+        self._context = context if context is not None else zmq.Context.instance()
+        self.socket: zmq.Socket = self._context.socket(kind)
+        # linger 0: closing (or Ctrl-C) never waits for a peer that may never read.
+        self.socket.setsockopt(zmq.LINGER, 0)
+        self.endpoint = ""
+
+    def close(self) -> None:
+        """Close the socket now, discarding anything unsent (idempotent)."""
+        if not self.socket.closed:
+            self.socket.close(linger=0)
+
+    @property
+    def closed(self) -> bool:
+        return bool(self.socket.closed)
+
+    def __enter__(self) -> _Socket:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def _fail_init(self) -> None:
+        """Close the socket when the constructor fails after creating it."""
+        self.close()
+
+
+class Publisher(_Socket):
+    """A PUB socket sending multipart messages without copying their buffers.
+
+    ``hwm`` messages queue per subscriber before newer ones are dropped for that subscriber
+    (a publisher never blocks on a slow consumer). ``endpoint`` holds the resolved address.
+    """
+
+    def __init__(
+        self,
+        endpoint: str,
+        bind: bool = True,
+        context: zmq.Context | None = None,
+        *,
+        hwm: int = 100,
+    ) -> None:
+        super().__init__(zmq.PUB, context)
+        try:
+            self.socket.setsockopt(zmq.SNDHWM, hwm)
+            self.endpoint = _attach(self.socket, endpoint, bind)
+        except BaseException:
+            self._fail_init()
+            raise
+
+    def __enter__(self) -> Publisher:
+        return self
+
+    def send(self, frames: Sequence[bytes | memoryview | zmq.Frame]) -> None:
+        """Send one message ``[topic, *payload]``; buffers are sent zero-copy, so callers must
+        not modify them afterwards (numpy arrays: send a copy if you will reuse the array)."""
+        if not frames:
+            raise ValueError("a message needs at least a topic frame")
+        self.socket.send_multipart(list(frames), copy=False)
+
+
+class Subscriber(_Socket):
+    """A SUB socket receiving messages of exactly the given topics, keeping the newest.
+
+    ``topics``: one topic or several (str or bytes). ZeroMQ filters by prefix, so frame 0 is also
+    compared exactly: subscribing to ``scan`` never yields ``scan2``. ``keep_newest``: how many
+    messages of each topic are kept when the consumer is slower than the publisher; older ones
+    are dropped and counted in ``dropped`` (messages lost earlier, in a full publisher queue,
+    cannot be counted). Kept messages come out oldest first, topics interleaved as they came.
+    ``max_message_bytes``: larger messages are discarded and counted in ``oversized``. (Not
+    ZMQ_MAXMSGSIZE: libzmq takes a larger frame for a protocol error and closes the connection
+    for good, without reconnecting, so one oversized scan would cut a node off its sensor.)
+    ``rcvhwm``: messages ZeroMQ queues before holding back the sender (default: topics x
+    keep_newest + 4). It bounds the memory of unread scans; messages held back wait in the
+    publisher's queue (its ``hwm``), which is why sensor publishers keep that small too.
+    """
+
+    def __init__(
+        self,
+        endpoint: str,
+        topics: str | bytes | Sequence[str | bytes],
+        bind: bool = False,
+        keep_newest: int = 1,
+        context: zmq.Context | None = None,
+        *,
+        max_message_bytes: int | None = None,
+        rcvhwm: int | None = None,
+    ) -> None:
+        if keep_newest < 1:
+            raise ValueError(f"keep_newest must be at least 1, got {keep_newest}")
+        if isinstance(topics, (str, bytes)):
+            topics = [topics]
+        self.topics = frozenset(t.encode() if isinstance(t, str) else bytes(t) for t in topics)
+        if not self.topics:
+            raise ValueError("subscribe to at least one topic")
+        self.keep_newest = keep_newest
+        self.rcvhwm = rcvhwm if rcvhwm is not None else len(self.topics) * keep_newest + 4
+        self.max_message_bytes = max_message_bytes
+        self.dropped = 0  # older messages discarded because newer ones arrived
+        self.oversized = 0  # messages above max_message_bytes
+        self.last_oversized: tuple[bytes, int] | None = None  # (topic, bytes) of the latest
+        self.received = 0  # messages of our topics taken off the socket
+        self._pending: collections.deque[Frames] = collections.deque()
+        super().__init__(zmq.SUB, context)
+        try:
+            # A small receive queue bounds the memory held by unread (large) scans; drain
+            # does the dropping. Too small and stale scans wait in the publisher's queue.
+            self.socket.setsockopt(zmq.RCVHWM, self.rcvhwm)
+            for topic in sorted(self.topics):
+                self.socket.setsockopt(zmq.SUBSCRIBE, topic)
+            self.endpoint = _attach(self.socket, endpoint, bind)
+        except BaseException:
+            self._fail_init()
+            raise
+
+    def __enter__(self) -> Subscriber:
+        return self
+
+    @property
+    def pending(self) -> int:
+        """Messages received and kept but not yet returned by `recv`."""
+        return len(self._pending)
+
+    def recv(self, timeout_s: float | None = None) -> Frames | None:
+        """The oldest kept message after draining the socket, or None after ``timeout_s``.
+
+        ``timeout_s``: None waits forever, 0 only looks. Frame 0 is the topic (bytes); payload
+        frames are zero-copy memoryviews valid as long as they are referenced.
+        """
+        deadline = None if timeout_s is None else time.monotonic() + max(0.0, timeout_s)
+        while True:
+            self._drain()
+            if self._pending:
+                return self._pending.popleft()
+            if deadline is None:
+                wait_ms = -1
+            else:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                wait_ms = max(1, int(left * 1000))
+            # A wake-up may bring only other topics' messages: loop until the deadline.
+            if not self.socket.poll(wait_ms, zmq.POLLIN) and deadline is not None:
+                if time.monotonic() >= deadline:
+                    return None
+
+    def _drain(self) -> None:
+        """Move everything that has arrived into the kept queue, dropping the oldest.
+
+        A pass that empties a (nearly) full receive queue means ZeroMQ may be holding back more
+        (the queue is only ``rcvhwm`` deep, and libzmq stops reading at about half of that):
+        wait a moment for its I/O thread to refill the queue and drain again, so that what we
+        keep really is the newest. A consumer that keeps up never waits here.
+        """
+        refill_at = max(2, self.rcvhwm // 2)
+        total = 0
+        while total < _MAX_DRAIN:
+            count = 0
+            while total + count < _MAX_DRAIN:
+                try:
+                    parts = self.socket.recv_multipart(zmq.NOBLOCK, copy=False)
+                except zmq.Again:
+                    break
+                count += 1
+                self._keep(parts)
+            total += count
+            if count < refill_at or not self.socket.poll(_REFILL_WAIT_MS, zmq.POLLIN):
+                return
+
+    def _keep(self, parts: list[zmq.Frame]) -> None:
+        """Queue one received message if it is of our topics and within the size limit."""
+        topic = parts[0].bytes
+        if topic not in self.topics:
+            return  # a prefix match of another topic (scan2 for scan)
+        self.received += 1
+        if self.max_message_bytes is not None:
+            size = sum(len(p) for p in parts)
+            if size > self.max_message_bytes:
+                self.oversized += 1
+                self.last_oversized = (topic, size)
+                return
+        frames: Frames = [topic, *(p.buffer for p in parts[1:])]
+        self._pending.append(frames)
+        # Per topic, like one ROS subscription queue each: a burst of obstacles must not push
+        # out the newest surfaces. The queue holds at most topics x keep_newest messages.
+        if sum(1 for f in self._pending if f[0] == topic) > self.keep_newest:
+            for i, old in enumerate(self._pending):
+                if old[0] == topic:
+                    del self._pending[i]
+                    self.dropped += 1
+                    break

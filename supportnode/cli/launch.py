@@ -1,0 +1,44 @@
+"""`supportnode launch FILE`: start the processes of a launch file and supervise them."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="launch file (YAML list of processes, see launch/*.yaml)")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="configuration override passed on to every 'supportnode' process as --set "
+        "KEY=VALUE, e.g. --set node.detection_rate=2 (repeatable; other programs get none)",
+    )
+    parser.add_argument(
+        "--stop-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="seconds a process gets to exit after SIGTERM before SIGKILL (default 5)",
+    )
+    parser.add_argument(
+        "--check", action="store_true", help="only check the file and print the command lines"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    import shlex
+
+    from supportnode.config import parse_override
+    from supportnode.launch import Launcher, load_launch
+
+    for text in args.overrides:
+        parse_override(text)  # a malformed override fails here, not in every child
+    launch = load_launch(args.file)
+    if args.check:
+        for spec in launch.processes:
+            print(f"{spec.name}: {shlex.join(spec.argv(args.overrides))}")
+        return 0
+    return Launcher(launch, args.overrides, stop_timeout=args.stop_timeout).run()

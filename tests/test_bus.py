@@ -1,0 +1,186 @@
+"""ZeroMQ transport: round trips on 127.0.0.1, exact topics, keep-newest drops, endpoint errors."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+import zmq
+
+from supportnode.bus import BusError, Publisher, Subscriber, check_endpoint
+from supportnode.errors import SupportNodeError
+
+
+def _connected(pub: Publisher, sub: Subscriber, topic: bytes = b"scan") -> None:
+    """Send probes until the subscription has reached the publisher (ZeroMQ's slow joiner:
+    messages published before that are lost), then discard the probes."""
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        pub.send([topic, b"probe"])
+        if sub.recv(0.02) is not None:
+            while sub.recv(0.02) is not None:
+                pass
+            sub.dropped = 0
+            return
+    raise AssertionError("subscriber never connected")
+
+
+def test_round_trip_tcp_random_port():
+    with Publisher("tcp://127.0.0.1:*") as pub:
+        assert pub.endpoint.startswith("tcp://127.0.0.1:") and not pub.endpoint.endswith("*")
+        with Subscriber(pub.endpoint, "scan") as sub:
+            _connected(pub, sub)
+            payload = bytes(range(256)) * 1000
+            pub.send([b"scan", b"header", memoryview(payload)])
+            frames = sub.recv(2.0)
+    assert frames is not None
+    assert frames[0] == b"scan"
+    assert bytes(frames[1]) == b"header"
+    assert bytes(frames[2]) == payload
+    assert sub.closed and pub.closed
+
+
+def test_subscriber_binds_publisher_connects():
+    with Subscriber("tcp://127.0.0.1:*", ["scan"], bind=True) as sub:
+        with Publisher(sub.endpoint, bind=False) as pub:
+            _connected(pub, sub)
+            pub.send([b"scan", b"x"])
+            frames = sub.recv(2.0)
+    assert frames is not None and bytes(frames[1]) == b"x"
+
+
+def test_topic_filter_is_exact():
+    with (
+        Publisher("tcp://127.0.0.1:*") as pub,
+        Subscriber(pub.endpoint, "scan", keep_newest=10) as sub,
+    ):
+        _connected(pub, sub)
+        pub.send([b"scan2", b"no"])
+        pub.send([b"sc", b"no"])
+        pub.send([b"scan", b"yes"])
+        first = sub.recv(2.0)
+        assert first is not None and first[0] == b"scan" and bytes(first[1]) == b"yes"
+        assert sub.recv(0.1) is None
+        assert sub.dropped == 0
+
+
+def test_several_topics():
+    with (
+        Publisher("tcp://127.0.0.1:*") as pub,
+        Subscriber(pub.endpoint, ["a", b"b"], keep_newest=5) as sub,
+    ):
+        _connected(pub, sub, b"a")
+        for topic in (b"a", b"c", b"b"):
+            pub.send([topic, topic])
+        got = [sub.recv(1.0), sub.recv(1.0)]
+        assert [f[0] for f in got if f] == [b"a", b"b"]
+
+
+@pytest.mark.parametrize("keep", [1, 3])
+def test_keep_newest_drops_old_messages(keep):
+    with (
+        Publisher("tcp://127.0.0.1:*") as pub,
+        Subscriber(pub.endpoint, "scan", keep_newest=keep) as sub,
+    ):
+        _connected(pub, sub)
+        n = 20
+        for i in range(n):
+            pub.send([b"scan", str(i).encode()])
+        # A slow consumer: everything has arrived (or been dropped in ZeroMQ's queues) by now.
+        time.sleep(0.2)
+        got = []
+        while (frames := sub.recv(0.1)) is not None:
+            got.append(int(bytes(frames[1])))
+    # The newest message always survives, in order; every message is received or counted
+    # unless ZeroMQ's own small queue dropped it (uncountable by design).
+    assert got[-1] == n - 1
+    assert got == sorted(got) and 1 <= len(got) <= keep
+    assert sub.dropped >= 1
+    assert len(got) + sub.dropped <= n
+
+
+def test_recv_timeout_returns_none_promptly():
+    with Subscriber("inproc://nothing-here", "scan") as sub:
+        t0 = time.monotonic()
+        assert sub.recv(0.05) is None
+        assert time.monotonic() - t0 < 0.5
+        assert sub.recv(0) is None
+
+
+def test_inproc_shared_context():
+    ctx = zmq.Context()
+    try:
+        with (
+            Publisher("inproc://bus-test", context=ctx) as pub,
+            Subscriber("inproc://bus-test", "t", context=ctx) as sub,
+        ):
+            _connected(pub, sub, b"t")
+            pub.send([b"t", b"inproc"])
+            frames = sub.recv(1.0)
+            assert frames is not None and bytes(frames[1]) == b"inproc"
+    finally:
+        ctx.term()
+
+
+def test_ipc_endpoint(tmp_path):
+    endpoint = f"ipc://{tmp_path}/bus.sock"
+    with Publisher(endpoint) as pub, Subscriber(endpoint, "t") as sub:
+        _connected(pub, sub, b"t")
+        pub.send([b"t", b"ipc"])
+        frames = sub.recv(1.0)
+    assert frames is not None and bytes(frames[1]) == b"ipc"
+
+
+def test_oversized_messages_are_discarded():
+    with (
+        Publisher("tcp://127.0.0.1:*") as pub,
+        Subscriber(pub.endpoint, "t", keep_newest=5, max_message_bytes=1000) as sub,
+    ):
+        _connected(pub, sub, b"t")
+        pub.send([b"t", b"a" * 500, b"b" * 600])  # each frame fits, the message does not
+        pub.send([b"t", b"small"])
+        frames = sub.recv(1.0)
+        assert frames is not None and bytes(frames[1]) == b"small"
+        assert sub.oversized == 1
+
+
+def test_address_in_use_names_the_endpoint():
+    with Publisher("tcp://127.0.0.1:*") as first:
+        with pytest.raises(BusError, match=rf"^{first.endpoint}: address already in use$"):
+            Publisher(first.endpoint)
+        assert issubclass(BusError, SupportNodeError)
+
+
+@pytest.mark.parametrize(
+    "endpoint, message",
+    [
+        ("udp://127.0.0.1:5", "unsupported endpoint"),
+        ("127.0.0.1:5556", "unsupported endpoint"),
+        ("tcp://127.0.0.1", "without a port"),
+        ("tcp://300.1.1.1:5556", "tcp://300.1.1.1:5556: cannot bind"),
+    ],
+)
+def test_bad_endpoints(endpoint, message):
+    with pytest.raises(BusError, match=message):
+        Publisher(endpoint)
+    assert check_endpoint("inproc://x") == "inproc://x"
+
+
+def test_keep_newest_must_be_positive():
+    with pytest.raises(ValueError, match="keep_newest"):
+        Subscriber("inproc://x", "t", keep_newest=0)
+
+
+def test_keep_newest_is_per_topic():
+    with (
+        Publisher("tcp://127.0.0.1:*") as pub,
+        Subscriber(pub.endpoint, ["surfaces", "obstacles"], keep_newest=1) as sub,
+    ):
+        _connected(pub, sub, b"surfaces")
+        pub.send([b"surfaces", b"s1"])
+        for i in range(5):  # a burst of one topic must not push out the other
+            pub.send([b"obstacles", b"o%d" % i])
+        time.sleep(0.1)
+        got = [sub.recv(0.5), sub.recv(0.5), sub.recv(0.05)]
+    assert [bytes(f[1]) for f in got if f] == [b"s1", b"o4"]
+    assert sub.dropped == 4
