@@ -213,3 +213,12 @@ def test_sparse_scan_lines_on_a_ramp_are_not_a_surface():
     for y in np.arange(0.0, 1.5, 0.11):  # rings 11 cm apart, each along a contour
         rings.append(np.c_[x, np.full_like(x, y), np.full_like(x, np.tan(np.radians(15)) * y)])
     assert detect_surfaces(np.vstack(rings), SurfaceParams(max_step=0.04)).surfaces == []
+
+
+def test_outline_rings_corner_touching_and_l_shape():
+    rings = cells_outline(np.array([[0, 0], [1, 1]]), (1.0, 1.0))
+    assert len(rings) == 2  # cells meeting at a corner: two separate rings
+    (l_shape,) = cells_outline(np.array([[0, 0], [1, 0], [0, 1]]), (0.5, 0.5))
+    assert len(l_shape) == 6
+    x, y = l_shape[:, 0], l_shape[:, 1]
+    assert 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) == pytest.approx(0.75)

@@ -766,36 +766,48 @@ def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.
     jy, ix = np.nonzero(filled & ~np.roll(filled, 1, axis=1))  # nothing left
     edges.append(np.stack([ix, jy + 1, ix, jy], 1))
     e = np.concatenate(edges)
-    outgoing: dict[tuple[int, int], list[int]] = {}
-    for i, (x0, y0, _, _) in enumerate(e.tolist()):
-        outgoing.setdefault((x0, y0), []).append(i)
-    used = np.zeros(len(e), dtype=bool)
+    nxt = _next_edge(e)
+    n = len(e)
+    graph = coo_matrix((np.ones(n, dtype=np.int8), (np.arange(n), nxt)), shape=(n, n))
+    _, ring = connected_components(graph, directed=False)
+    # Walk order without walking: cut each ring after its smallest edge index, then rank every
+    # edge by its distance to the cut (pointer jumping: log2(E) vectorised rounds).
+    root = np.full(ring.max() + 1, n, dtype=np.int64)
+    np.minimum.at(root, ring, np.arange(n))
+    succ = np.where(nxt == root[ring], -1, nxt)
+    dist = (succ >= 0).astype(np.int64)
+    while (succ >= 0).any():
+        ok = succ >= 0
+        hop = np.maximum(succ, 0)
+        dist = dist + np.where(ok, dist[hop], 0)
+        succ = np.where(ok, succ[hop], -1)
+    order = np.lexsort((-dist, ring))
+    bounds = np.searchsorted(ring[order], np.arange(ring.max() + 2))
     rings = []
-    for start in range(len(e)):  # walks the boundary (perimeter-sized), once per edge
-        if used[start]:
-            continue
-        ring = []
-        cur = start
-        while not used[cur]:
-            used[cur] = True
-            x0, y0, x1, y1 = e[cur]
-            ring.append((x0, y0))
-            dx, dy = x1 - x0, y1 - y0
-            options = [i for i in outgoing.get((x1, y1), []) if not used[i]]
-            if not options:
-                break
-
-            # Prefer the left turn, so corner-touching cells make separate rings.
-            def turn(i: int, dx: int = dx, dy: int = dy) -> int:
-                ex, ey = e[i, 2] - e[i, 0], e[i, 3] - e[i, 1]
-                return -(dx * ey - dy * ex)
-
-            cur = min(options, key=turn)
-        r = np.asarray(ring, dtype=np.float64)
-        r = _drop_collinear(r)
-        rings.append((r + origin) * np.asarray(cell_size))
+    for k in range(ring.max() + 1):  # one entry per ring (outline and holes)
+        r = e[order[bounds[k] : bounds[k + 1]], :2].astype(np.float64)
+        rings.append((_drop_collinear(r) + origin) * np.asarray(cell_size))
     rings.sort(key=lambda r: -abs(_ring_area(r)))
     return rings
+
+
+def _next_edge(e: np.ndarray) -> np.ndarray:
+    """Successor of each directed boundary edge (E, 4: x0 y0 x1 y1): the edge leaving its end
+    vertex, preferring the left turn so that cells touching at a corner make separate rings."""
+    width = int(e[:, [0, 2]].max()) + 2
+    start = e[:, 0] * width + e[:, 1]
+    end = e[:, 2] * width + e[:, 3]
+    by_start = np.argsort(start, kind="stable")
+    first = np.searchsorted(start[by_start], end)
+    count = np.searchsorted(start[by_start], end, side="right") - first
+    a = by_start[np.minimum(first, len(e) - 1)]
+    b = by_start[np.minimum(first + 1, len(e) - 1)]
+    d = e[:, 2:] - e[:, :2]
+
+    def left(j: np.ndarray) -> np.ndarray:  # z of d_i x d_j: +1 left, 0 straight, -1 right
+        return d[:, 0] * d[j, 1] - d[:, 1] * d[j, 0]
+
+    return np.where((count > 1) & (left(b) > left(a)), b, a)
 
 
 def _drop_collinear(ring: np.ndarray) -> np.ndarray:
