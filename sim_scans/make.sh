@@ -17,3 +17,8 @@ $SN sim sloped --points 60000 --seed 0 --out "$OUT/sloped_sampled.ply"
 rm -rf "$OUT/shelf_lidar" "$OUT/table_chairs_lidar"
 $SN sim shelf --sensor lidar --preset os128 --frames 5 --seed 0 --out "$OUT/shelf_lidar"
 $SN sim table_chairs --sensor lidar --preset os128 --frames 5 --seed 0 --out "$OUT/table_chairs_lidar"
+
+# The same sequences as MCAP recordings for `supportnode play` (launch/demo.yaml): PointCloud on
+# topic scan in the sensor frame (frame_id lidar) with the sensor pose, stamps 0.1 s apart.
+$SN record --from "$OUT/shelf_lidar" -o "$OUT/shelf_lidar.mcap" --quiet
+$SN record --from "$OUT/table_chairs_lidar" -o "$OUT/table_chairs_lidar.mcap" --quiet

@@ -19,6 +19,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("supportnode.cli.evaluate", "score a detect output against simulator ground truth"),
     "render": ("supportnode.cli.render", "draw a detection result as a PNG"),
     "launch": ("supportnode.cli.launch", "start a launch file's processes, stop them in order"),
+    "run": ("supportnode.cli.run", "run the node: scans in, surfaces and obstacles out"),
+    "record": ("supportnode.cli.record", "record published messages into an MCAP file"),
+    "play": ("supportnode.cli.play", "publish a recording, ROS bag or cloud folder with its timing"),
+    "info": ("supportnode.cli.info", "topics, counts, rates and sizes of a recording or bag"),
 }
 
 

@@ -1,0 +1,460 @@
+"""Every offline source of scans behind one iterator: `open_source(path).messages()`.
+
+Picked by extension or folder contents, never by probing:
+
+- ``*.mcap``: our recordings (messages replayed byte for byte) and ROS 2 / ROS 1 MCAP files
+  (sensor_msgs/PointCloud2 converted; other channels skipped with one warning each);
+- ``*.bag`` (ROS 1), ``*.db3`` (ROS 2), a folder with ``metadata.yaml`` (ROS 2 bag): PointCloud2
+  topics converted, via rosbags;
+- a folder of simulator frames ``frame_*.npz`` (points, sensor_pose 4x4, stamp): clouds in the
+  sensor frame (``lidar``) with the sensor pose, at their stamps;
+- a folder of cloud files (.ply .pcd .xyz .txt .csv .npy .npz .obj, read with `read_cloud`),
+  in name order, ``hz`` per second.
+
+Each `SourceMessage` carries wire frames ready to publish and the time that drives replay
+(receive time for recordings, bag time for bags, stamps or file order for folders).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+
+from supportnode.errors import CloudFormatError, ProtocolError, SupportNodeError
+from supportnode.io.recording import McapFile, RecordingError
+from supportnode.msgs import Limits, Message, PointCloud, decode_any
+
+__all__ = [
+    "FolderSource",
+    "McapSource",
+    "RosbagSource",
+    "Source",
+    "SourceMessage",
+    "open_source",
+]
+
+CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz", ".txt", ".csv", ".npy", ".npz", ".obj")
+
+
+@dataclass
+class SourceMessage:
+    """One message of a source: ``time`` (s) drives replay timing, ``stamp`` (s) is the
+    message's own; ``frames`` are wire frames ``[topic, header, *buffers]``."""
+
+    time: float
+    stamp: float
+    topic: str
+    type: str
+    frames: list[bytes | memoryview] = field(repr=False)
+
+    @property
+    def size(self) -> int:
+        """Bytes of all frames."""
+        return sum(memoryview(f).nbytes for f in self.frames)
+
+    def decode(self, limits: Limits | None = None) -> Message:
+        """The decoded message (raises ProtocolError)."""
+        return decode_any(self.frames, limits)
+
+
+class Source(ABC):
+    """A recording or folder to play. ``warnings``: one line per problem met so far."""
+
+    kind: str = ""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = os.fspath(path)
+        self.warnings: list[str] = []
+        self._warned: set[str] = set()
+
+    def warn_once(self, key: str, text: str) -> None:
+        if key not in self._warned:
+            self._warned.add(key)
+            self.warnings.append(text)
+
+    @abstractmethod
+    def topics(self) -> dict[str, str]:
+        """Topic -> message type of what `messages` yields (types after conversion)."""
+
+    @abstractmethod
+    def start_time(self) -> float | None:
+        """Time of the first message, seconds (None: the source is empty)."""
+
+    def duration(self) -> float | None:
+        """Seconds from the first to the last message, when known without reading them all."""
+        return None
+
+    @abstractmethod
+    def messages(
+        self,
+        topics: Collection[str] | None = None,
+        start: float = 0.0,
+        duration: float | None = None,
+    ) -> Iterator[SourceMessage]:
+        """Messages on ``topics`` (None: all) from ``start`` seconds after the first message,
+        for ``duration`` seconds (None: to the end), in time order."""
+
+    def _window(self, start: float, duration: float | None) -> tuple[float | None, float | None]:
+        t0 = self.start_time()
+        if t0 is None:
+            return None, None
+        begin = t0 + max(0.0, start)
+        return begin, (None if duration is None else begin + duration)
+
+    def close(self) -> None:  # noqa: B027  # sources without open files need no close
+        """Release files (idempotent)."""
+
+    def __enter__(self) -> Source:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+# ------------------------------------------------------------------------------------- MCAP
+
+
+class McapSource(Source):
+    """An MCAP file: our messages as recorded, ROS PointCloud2 channels converted."""
+
+    kind = "mcap"
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(path)
+        self.file = McapFile(self.path)
+        self._t0: float | None = None
+        self._seq: dict[str, int] = {}
+
+    @property
+    def warnings(self) -> list[str]:  # type: ignore[override]
+        return self.file.warnings + self._own
+
+    @warnings.setter
+    def warnings(self, value: list[str]) -> None:
+        self._own = value
+
+    def _playable(self, ch: object) -> str | None:
+        """Our type name or 'PointCloud' for a channel we can play, else None (warned)."""
+        from supportnode.io.recording import ChannelInfo
+        from supportnode.io.rosbag import POINTCLOUD2_TYPES
+
+        assert isinstance(ch, ChannelInfo)
+        if ch.is_supportnode:
+            return ch.type
+        if ch.schema_name in POINTCLOUD2_TYPES and ch.message_encoding in ("cdr", "ros1"):
+            return "PointCloud"
+        self.warn_once(
+            f"skip:{ch.id}",
+            f"{self.path}: topic {ch.topic!r} skipped ({ch.schema_name or 'no schema'} in "
+            f"{ch.message_encoding or 'no encoding'}: only supportnode messages and "
+            "sensor_msgs/PointCloud2 play)",
+        )
+        return None
+
+    def topics(self) -> dict[str, str]:
+        out: dict[str, str] = {}
+        for ch in self.file.scan_channels().values():
+            t = self._playable(ch)
+            if t is not None:
+                out[ch.topic] = t
+        return out
+
+    def start_time(self) -> float | None:
+        if self._t0 is None:
+            if self.file.stats.start_time is not None:
+                self._t0 = self.file.stats.start_time * 1e-9
+            else:
+                first = next(iter(self.file.messages()), None)
+                self._t0 = None if first is None else first.log_time * 1e-9
+        return self._t0
+
+    def duration(self) -> float | None:
+        st = self.file.stats
+        if st.start_time is None or st.end_time is None:
+            return None
+        return (st.end_time - st.start_time) * 1e-9
+
+    def messages(
+        self,
+        topics: Collection[str] | None = None,
+        start: float = 0.0,
+        duration: float | None = None,
+    ) -> Iterator[SourceMessage]:
+        begin, end = self._window(start, duration)
+        if begin is None:
+            return
+        lo = None if start <= 0 else round(begin * 1e9)
+        hi = None if end is None else round(end * 1e9)
+        for raw in self.file.messages(topics, lo, hi):
+            ch = raw.channel
+            type_name = self._playable(ch)
+            if type_name is None:
+                continue
+            try:
+                if ch.is_supportnode:
+                    frames = raw.frames()
+                    stamp = raw.publish_time * 1e-9
+                else:
+                    frames, stamp = self._convert(raw.data, ch.message_encoding, ch.topic)
+            except (SupportNodeError, ValueError) as err:
+                self.warn_once(f"bad:{ch.id}", f"{self.path}: topic {ch.topic!r}: {err} (skipped)")
+                continue
+            yield SourceMessage(raw.log_time * 1e-9, stamp, ch.topic, type_name, frames)
+
+    def _convert(self, data: bytes, encoding: str, topic: str) -> tuple[list, float]:
+        from supportnode.io.rosbag import deserialize_pointcloud2, pointcloud2_to_cloud
+
+        seq = self._seq.get(topic, 0)
+        self._seq[topic] = seq + 1
+        notes: list[str] = []
+        cloud = pointcloud2_to_cloud(
+            deserialize_pointcloud2(data, encoding), seq=seq, warnings=notes
+        )
+        for note in notes:
+            self.warn_once(f"note:{topic}:{note}", f"{self.path}: topic {topic!r}: {note}")
+        return list(cloud.encode(topic)), cloud.stamp
+
+    def close(self) -> None:
+        self.file.close()
+
+
+# --------------------------------------------------------------------------------- ROS bags
+
+
+class RosbagSource(Source):
+    """A ROS 1 or ROS 2 bag: its PointCloud2 topics as PointCloud messages (needs rosbags)."""
+
+    kind = "rosbag"
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        super().__init__(path)
+        from supportnode.io.rosbag import POINTCLOUD2_TYPES, RosBag
+
+        self.bag = RosBag(self.path)
+        self._clouds = {t for t, (typ, _) in self.bag.topics.items() if typ in POINTCLOUD2_TYPES}
+        for t, (typ, _) in sorted(self.bag.topics.items()):
+            if t not in self._clouds:
+                self.warn_once(
+                    f"skip:{t}",
+                    f"{self.path}: topic {t!r} skipped ({typ}: only sensor_msgs/PointCloud2 plays)",
+                )
+
+    def topics(self) -> dict[str, str]:
+        return dict.fromkeys(sorted(self._clouds), "PointCloud")
+
+    def start_time(self) -> float | None:
+        return None if self.bag.start_time is None else self.bag.start_time * 1e-9
+
+    def duration(self) -> float | None:
+        if self.bag.start_time is None or self.bag.end_time is None:
+            return None
+        return max(0.0, (self.bag.end_time - self.bag.start_time) * 1e-9)
+
+    def messages(
+        self,
+        topics: Collection[str] | None = None,
+        start: float = 0.0,
+        duration: float | None = None,
+    ) -> Iterator[SourceMessage]:
+        from supportnode.io.rosbag import PointCloud2Error
+
+        begin, end = self._window(start, duration)
+        if begin is None:
+            return
+        wanted = self._clouds if topics is None else self._clouds & set(topics)
+        seqs: dict[str, int] = {}
+        lo = round(begin * 1e9)
+        hi = None if end is None else round(end * 1e9)
+        for m in self.bag.messages(wanted, lo, hi):
+            seq = seqs.get(m.topic, 0)
+            seqs[m.topic] = seq + 1
+            notes: list[str] = []
+            try:
+                cloud = self.bag.pointcloud(m, seq=seq, warnings=notes)
+                frames = list(cloud.encode(m.topic))
+            except (PointCloud2Error, ProtocolError) as err:
+                self.warn_once(f"bad:{m.topic}", f"{self.path}: topic {m.topic!r}: {err} (skipped)")
+                continue
+            for note in notes:
+                self.warn_once(f"note:{m.topic}:{note}", f"{self.path}: topic {m.topic!r}: {note}")
+            yield SourceMessage(m.log_time * 1e-9, cloud.stamp, m.topic, "PointCloud", frames)
+        self.warnings.extend(w for w in self.bag.warnings if w not in self.warnings)
+
+    def close(self) -> None:
+        self.bag.close()
+
+
+# ---------------------------------------------------------------------------------- folders
+
+
+def _natural_key(p: Path) -> list[object]:
+    """frame_2 before frame_10."""
+    return [int(s) if s.isdigit() else s.lower() for s in re.split(r"(\d+)", p.name)]
+
+
+class FolderSource(Source):
+    """A folder of cloud files (name order, ``hz`` per second from time 0) or of simulator
+    frames ``frame_*.npz`` (their stamps). ``topic``: what the clouds are published on;
+    ``frame_id``: of cloud files (simulator frames are converted to the sensor frame, ``lidar``,
+    and carry the sensor pose)."""
+
+    kind = "folder"
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        topic: str = "scan",
+        hz: float = 10.0,
+        frame_id: str = "map",
+    ) -> None:
+        super().__init__(path)
+        if not hz > 0:
+            raise SupportNodeError(f"{self.path}: folder rate must be > 0 Hz, got {hz}")
+        self.topic, self.hz, self.frame_id = topic, hz, frame_id
+        folder = Path(self.path)
+        sim = sorted(folder.glob("frame_*.npz"), key=_natural_key)
+        self.simulator = bool(sim)
+        self.files = sim or sorted(
+            (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in CLOUD_EXTENSIONS),
+            key=_natural_key,
+        )
+        if not self.files:
+            raise SupportNodeError(
+                f"{self.path}: no cloud files ({' '.join(CLOUD_EXTENSIONS)}) or frame_*.npz"
+            )
+        self._times: list[float] | None = None
+
+    def times(self) -> list[float]:
+        """Each file's time: simulator stamps, else index / hz."""
+        if self._times is None:
+            if self.simulator:
+                self._times = []
+                for i, p in enumerate(self.files):
+                    try:
+                        with np.load(p) as z:
+                            self._times.append(
+                                float(z["stamp"]) if "stamp" in z.files else i / self.hz
+                            )
+                    except Exception:
+                        self._times.append(i / self.hz)  # reported when the frame is read
+            else:
+                self._times = [i / self.hz for i in range(len(self.files))]
+        return self._times
+
+    def topics(self) -> dict[str, str]:
+        return {self.topic: "PointCloud"}
+
+    def start_time(self) -> float | None:
+        return self.times()[0]
+
+    def duration(self) -> float | None:
+        return self.times()[-1] - self.times()[0]
+
+    def messages(
+        self,
+        topics: Collection[str] | None = None,
+        start: float = 0.0,
+        duration: float | None = None,
+    ) -> Iterator[SourceMessage]:
+        if topics is not None and self.topic not in topics:
+            return
+        begin, end = self._window(start, duration)
+        for seq, (p, t) in enumerate(zip(self.files, self.times(), strict=True)):
+            if (begin is not None and t < begin - 1e-9) or (end is not None and t >= end - 1e-9):
+                continue
+            try:
+                cloud = (
+                    self._sim_frame(p, t, seq) if self.simulator else self._cloud_file(p, t, seq)
+                )
+                frames = list(cloud.encode(self.topic))
+            except (SupportNodeError, OSError, ValueError, KeyError) as err:
+                self.warnings.append(f"{p}: skipped ({str(err).removeprefix(str(p) + ': ')})")
+                continue
+            yield SourceMessage(t, cloud.stamp, self.topic, "PointCloud", frames)
+
+    def _cloud_file(self, p: Path, t: float, seq: int) -> PointCloud:
+        from supportnode.io.clouds import read_cloud
+
+        c = read_cloud(p)
+        fields = {}
+        for name, values in c.fields.items():
+            a = np.asarray(values)
+            if (
+                re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,63}", name)
+                and a.dtype.kind in "iuf"
+                and a.dtype.itemsize <= 8
+            ):
+                fields[name] = a if a.dtype != np.float16 else a.astype(np.float32)
+            else:
+                self.warn_once(f"field:{name}", f"{self.path}: field '{name}' ({a.dtype}) left out")
+        return PointCloud.from_xyz(
+            c.points, stamp=t, frame_id=self.frame_id, seq=seq, fields=fields
+        )
+
+    def _sim_frame(self, p: Path, t: float, seq: int) -> PointCloud:
+        from supportnode.client import pose_from_matrix
+
+        try:
+            with np.load(p) as z:
+                points = np.asarray(z["points"], dtype=np.float64)
+                pose = np.asarray(z["sensor_pose"], dtype=np.float64)
+                frame = str(z["frame"]) if "frame" in z.files else "world"
+                tilt = np.asarray(z["tilt_rotation"]) if "tilt_rotation" in z.files else np.eye(3)
+        except (KeyError, ValueError, OSError) as err:
+            raise CloudFormatError(f"{p}: not a simulator frame ({err})") from err
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise CloudFormatError(f"{p}: points must be (N, 3), got {points.shape}")
+        if frame == "world":  # into the sensor frame, as a driver sends it: p_s = R^T (p_w - t)
+            points = (points - pose[:3, 3]) @ pose[:3, :3]
+        # A tilted sensor frame (simulated IMU-less mount) is not the pose's frame: no pose then.
+        posed = frame == "world" or np.allclose(tilt, np.eye(3))
+        return PointCloud.from_xyz(
+            points.astype(np.float32),
+            stamp=t,
+            frame_id="lidar",
+            seq=seq,
+            pose=pose_from_matrix(pose) if posed else None,
+        )
+
+
+# -------------------------------------------------------------------------------- choosing
+
+
+def open_source(
+    path: str | os.PathLike[str], *, topic: str = "scan", hz: float = 10.0, frame_id: str = "map"
+) -> Source:
+    """The source for ``path``, chosen by extension or folder contents (see the module doc).
+
+    ``topic``, ``hz``, ``frame_id``: for folders of clouds only. Raises a SupportNodeError
+    (RecordingError, RosbagError, ...) with one line when the path cannot be a source.
+    """
+    name = os.fspath(path)
+    p = Path(name)
+    if not p.exists():
+        raise RecordingError(f"{name}: no such file or folder")
+    if p.is_dir():
+        if (p / "metadata.yaml").exists():
+            return RosbagSource(p)
+        return FolderSource(p, topic=topic, hz=hz, frame_id=frame_id)
+    ext = p.suffix.lower()
+    if ext == ".mcap":
+        return McapSource(p)
+    if ext in (".bag", ".db3"):
+        return RosbagSource(p)
+    raise RecordingError(
+        f"{name}: unknown recording type {p.suffix!r} (expected .mcap, .bag, .db3, a ROS 2 bag "
+        "folder or a folder of cloud files)"
+    )
