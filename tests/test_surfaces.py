@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import box_points, plane_points
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from supportnode.errors import InputError
 from supportnode.geometry.surfaces import cells_outline, detect_surfaces
@@ -222,3 +224,21 @@ def test_outline_rings_corner_touching_and_l_shape():
     assert len(l_shape) == 6
     x, y = l_shape[:, 0], l_shape[:, 1]
     assert 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) == pytest.approx(0.75)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.tuples(st.integers(-3, 40), st.integers(-50, 300)), min_size=1, max_size=120),
+)
+def test_outline_rings_enclose_exactly_the_cells(cell_list):
+    """Signed ring areas add up to the cells' area for any footprint: boundaries minus holes,
+    corner-touching cells, tall and wide shapes alike."""
+    cells = np.unique(np.array(cell_list, dtype=np.int64), axis=0)
+    rings = cells_outline(cells, (0.1, 0.2))
+
+    def area(r):
+        x, y = r[:, 0], r[:, 1]
+        return 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+    assert sum(area(r) for r in rings) == pytest.approx(len(cells) * 0.02)
+    assert all(len(r) >= 4 for r in rings)

@@ -347,7 +347,11 @@ def _split_footprint(
         inside = comp > 0
         peak = np.zeros(n)
         np.maximum.at(peak, comp[inside] - 1, depth[inside])
-        deep = (t * cell < radius) | (t <= _SPLIT_NECK_RATIO * peak)
+        # A part must itself be thicker than the neck that cuts it off: a wall's or a rail's
+        # footprint is all neck and stays whole.
+        deep = ((t * cell < radius) | (t <= _SPLIT_NECK_RATIO * peak)) & (
+            peak * cell >= 1.5 * radius
+        )
         if deep.sum() < 2:
             continue
         markers = np.where(deep[np.maximum(comp - 1, 0)] & (comp > 0), comp, 0)

@@ -776,7 +776,9 @@ def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.
     np.minimum.at(root, ring, np.arange(n))
     succ = np.where(nxt == root[ring], -1, nxt)
     dist = (succ >= 0).astype(np.int64)
-    while (succ >= 0).any():
+    for _ in range(int(np.ceil(np.log2(n + 1))) + 1):  # list ranking: log2(E) rounds suffice
+        if not (succ >= 0).any():
+            break
         ok = succ >= 0
         hop = np.maximum(succ, 0)
         dist = dist + np.where(ok, dist[hop], 0)
@@ -794,9 +796,9 @@ def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.
 def _next_edge(e: np.ndarray) -> np.ndarray:
     """Successor of each directed boundary edge (E, 4: x0 y0 x1 y1): the edge leaving its end
     vertex, preferring the left turn so that cells touching at a corner make separate rings."""
-    width = int(e[:, [0, 2]].max()) + 2
-    start = e[:, 0] * width + e[:, 1]
-    end = e[:, 2] * width + e[:, 3]
+    span = int(e[:, [1, 3]].max()) + 2  # vertex key x * span + y is unique since y < span
+    start = e[:, 0] * span + e[:, 1]
+    end = e[:, 2] * span + e[:, 3]
     by_start = np.argsort(start, kind="stable")
     first = np.searchsorted(start[by_start], end)
     count = np.searchsorted(start[by_start], end, side="right") - first
