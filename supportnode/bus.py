@@ -22,11 +22,11 @@ import collections
 import errno
 import time
 from collections.abc import Sequence
-from types import TracebackType
 from typing import TypeAlias
 
 import zmq
 
+from supportnode._closing import Closing
 from supportnode.errors import SupportNodeError
 
 __all__ = ["BusError", "Frames", "Publisher", "Subscriber", "check_endpoint"]
@@ -78,7 +78,7 @@ def _attach(sock: zmq.Socket, endpoint: str, bind: bool) -> str:
         raise BusError(f"{endpoint}: cannot {verb} ({err.strerror})") from err
 
 
-class _Socket:
+class _Socket(Closing):
     """Shared life cycle: one socket, linger 0, closed by `close` or leaving a ``with`` block."""
 
     def __init__(self, kind: int, context: zmq.Context | None) -> None:
@@ -96,17 +96,6 @@ class _Socket:
     @property
     def closed(self) -> bool:
         return bool(self.socket.closed)
-
-    def __enter__(self) -> _Socket:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def _fail_init(self) -> None:
         """Close the socket when the constructor fails after creating it."""

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 import zmq
 
 from supportnode import bus
+from supportnode._closing import Closing
 from supportnode.errors import InputError, ProtocolError
 from supportnode.msgs import (
     Diagnostics,
@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 
-class Subscriber:
+class Subscriber(Closing):
     """Decoded messages of one or more topics from ``endpoint``.
 
     ``topic``: a topic or a list of topics. ``limits``: size limits for decoding (defaults of
@@ -147,19 +147,8 @@ class Subscriber:
         """Close the socket (idempotent)."""
         self._sub.close()
 
-    def __enter__(self) -> Subscriber:
-        return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-
-class Publisher:
+class Publisher(Closing):
     """Publishes typed messages on one ``topic`` at ``endpoint`` (bound by default: drivers
     bind and the node connects, see `supportnode.params.NodeParams`).
 
@@ -226,17 +215,6 @@ class Publisher:
     def close(self) -> None:
         """Close the socket now, discarding anything unsent (idempotent)."""
         self._pub.close()
-
-    def __enter__(self) -> Publisher:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def pose_from_matrix(matrix: Any) -> Pose:

@@ -29,12 +29,12 @@ import time
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 from typing import Any, BinaryIO
 
 import msgpack
 
 from supportnode import __version__
+from supportnode._closing import Closing
 from supportnode.errors import SupportNodeError
 from supportnode.msgs import SCHEMA_VERSION, Header, Limits, peek_header
 
@@ -238,7 +238,7 @@ class TopicCount:
     bytes: int = 0
 
 
-class RecordingWriter:
+class RecordingWriter(Closing):
     """Writes supportnode messages to an MCAP file.
 
     compression: "zstd" (default: about 2x smaller than lz4 on scans, ~0.3 GB/s per core), "lz4"
@@ -350,17 +350,6 @@ class RecordingWriter:
         finally:
             self._file.close()
 
-    def __enter__(self) -> RecordingWriter:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
 
 # ------------------------------------------------------------------------------------- reading
 
@@ -425,7 +414,7 @@ class McapStats:
     uncompressed_bytes: int = 0
 
 
-class McapFile:
+class McapFile(Closing):
     """An MCAP file opened for reading: channels, summary, messages in log-time order.
 
     Indexed files are read chunk by chunk through the chunk index (``messages(start=...)``
@@ -721,17 +710,6 @@ class McapFile:
     def close(self) -> None:
         """Close the file (idempotent)."""
         self._file.close()
-
-    def __enter__(self) -> McapFile:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def _one_line(err: BaseException) -> str:

@@ -23,10 +23,10 @@ from abc import ABC, abstractmethod
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 
 import numpy as np
 
+from supportnode._closing import Closing
 from supportnode.errors import CloudFormatError, ProtocolError, SupportNodeError
 from supportnode.io.recording import McapFile, RecordingError
 from supportnode.msgs import Limits, Message, PointCloud, decode_any
@@ -64,7 +64,7 @@ class SourceMessage:
         return decode_any(self.frames, limits)
 
 
-class Source(ABC):
+class Source(ABC, Closing):
     """A recording or folder to play. ``warnings``: one line per problem met so far."""
 
     kind: str = ""
@@ -108,19 +108,8 @@ class Source(ABC):
         begin = t0 + max(0.0, start)
         return begin, (None if duration is None else begin + duration)
 
-    def close(self) -> None:  # noqa: B027  # sources without open files need no close
+    def close(self) -> None:  # sources without open files need no close
         """Release files (idempotent)."""
-
-    def __enter__(self) -> Source:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 # ------------------------------------------------------------------------------------- MCAP
