@@ -78,8 +78,22 @@ def test_set_and_config_change_parameters(table_cloud, tmp_path):
     cfg = tmp_path / "c.yaml"
     cfg.write_text("surfaces:\n  method: seed\n")
     out = tmp_path / "o"
-    assert main(["detect", str(path), "--config", str(cfg), "--set", "surfaces.psi_min=5",
-                 "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "detect",
+                str(path),
+                "--config",
+                str(cfg),
+                "--set",
+                "surfaces.psi_min=5",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     params = json.loads((out / "result.json").read_text())["params"]
     assert params["surfaces"]["method"] == "seed" and params["surfaces"]["psi_min"] == 5
 
@@ -111,9 +125,20 @@ def test_bad_config_key_names_file_and_line(table_cloud, tmp_path, capsys):
 def test_console_command_runs_as_a_process(table_cloud, tmp_path):
     path, _ = table_cloud
     proc = subprocess.run(
-        [sys.executable, "-m", "supportnode", "detect", str(path), "--out", str(tmp_path / "p"),
-         "--set", "surfaces.method=sed"],
-        capture_output=True, text=True, timeout=120,
+        [
+            sys.executable,
+            "-m",
+            "supportnode",
+            "detect",
+            str(path),
+            "--out",
+            str(tmp_path / "p"),
+            "--set",
+            "surfaces.method=sed",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 2
     assert "surfaces.method" in proc.stderr and "Traceback" not in proc.stderr
@@ -122,3 +147,38 @@ def test_console_command_runs_as_a_process(table_cloud, tmp_path):
 def _write(path, text):
     path.write_text(text)
     return path
+
+
+def test_align_recovers_heights_of_a_tilted_cloud(tmp_path, rng, capsys):
+    """A camera-style cloud, tilted and turned: --align finds the floor and the table 0.75 m
+    above it, and says by how much it rotated the cloud."""
+    pts = np.vstack(
+        [
+            plane_points(rng, -1.5, 1.5, -1.5, 1.5, 0.0, 40000),
+            plane_points(rng, -0.6, 0.6, -0.4, 0.4, 0.75, 15000),
+            box_points(rng, (0.2, 0.0, 0.85), (0.15, 0.15, 0.2), 2000),
+            np.c_[rng.uniform(-1.5, 1.5, 6000), np.full(6000, 1.5), rng.uniform(0, 1.5, 6000)],
+        ]
+    )
+    r, p = np.radians([25.0, -30.0])
+    rx = np.array([[1, 0, 0], [0, np.cos(r), -np.sin(r)], [0, np.sin(r), np.cos(r)]])
+    ry = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
+    path = tmp_path / "tilted.npy"
+    np.save(path, pts @ (ry @ rx).T)
+    out = tmp_path / "o"
+    assert main(["detect", str(path), "--align", "--out", str(out), "--no-objects"]) == 0
+    assert "gravity: tilt" in capsys.readouterr().out
+    result = json.loads((out / "result.json").read_text())
+    heights = [s["height"] for s in result["surfaces"]]
+    assert heights[1] - heights[0] == pytest.approx(0.75, abs=0.01)
+    assert result["gravity"]["tilt_deg"] == pytest.approx(38.6, abs=1.0)
+
+
+def test_align_refuses_a_cloud_without_horizontal_surfaces(tmp_path, rng, capsys):
+    v = rng.normal(size=(20000, 3))
+    np.save(tmp_path / "ball.npy", v / np.linalg.norm(v, axis=1, keepdims=True))
+    assert (
+        main(["detect", str(tmp_path / "ball.npy"), "--align", "--out", str(tmp_path / "o")]) == 2
+    )
+    err = capsys.readouterr().err
+    assert "horizontal surface" in err and len(err.strip().splitlines()) == 1

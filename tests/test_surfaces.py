@@ -242,3 +242,15 @@ def test_outline_rings_enclose_exactly_the_cells(cell_list):
 
     assert sum(area(r) for r in rings) == pytest.approx(len(cells) * 0.02)
     assert all(len(r) >= 4 for r in rings)
+
+
+def test_normal_filter_removes_the_seed_methods_false_positives(room):
+    """The report's option: with normals checked (on candidate points only), Algorithm 1 no
+    longer reports wall strips or leg tops, and still finds floor and table."""
+    pts, truth = room
+    plain = detect_surfaces(pts, SurfaceParams(method="seed"))
+    filtered = detect_surfaces(pts, SurfaceParams(method="seed", normal_filter=True))
+    assert filtered.stats["normal_filter_removed"] > 0
+    assert (filtered.labels[truth == 3] >= 0).mean() < 0.2 * (plain.labels[truth == 3] >= 0).mean()
+    heights = sorted(round(s.height, 2) for s in filtered.surfaces if s.point_count > 1000)
+    assert heights == [0.0, 0.73]
