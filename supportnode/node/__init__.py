@@ -1,0 +1,11 @@
+"""The node's state and loop: incremental voxel map (`map`), stable ids (`tracking`)."""
+
+__all__ = ["Node", "NodeOutput"]
+
+
+def __getattr__(name: str):  # lazy: `node.map` users do not pay for ZeroMQ and the pipeline
+    if name in __all__:
+        from supportnode.node import node as _node
+
+        return getattr(_node, name)
+    raise AttributeError(f"module 'supportnode.node' has no attribute {name!r}")

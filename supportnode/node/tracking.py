@@ -1,0 +1,217 @@
+"""Stable ids across scans for surfaces and clusters, by footprint overlap.
+
+Every detection is a footprint (a set of cells on a fixed 2-D grid, map frame) plus a height.
+A detection continues the track whose last footprint it overlaps most (intersection over union
+of cells), at a similar height; the assignment is optimal over all pairs (Hungarian,
+``scipy.optimize.linear_sum_assignment``), so it does not depend on the order of detections.
+Unmatched detections start new tracks (ids increase monotonically, never reused); a track
+unmatched for ``max_misses`` consecutive updates is reported gone and forgotten.
+
+Pure: no sockets, no printing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from supportnode.errors import InputError
+
+
+def pack_cells(cells: np.ndarray) -> np.ndarray:
+    """(C, 2) int cells (ix, iy) -> (C,) sorted unique int64 (32 bits each)."""
+    c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    return np.unique(((c[:, 0] + (1 << 31)) << 32) | ((c[:, 1] + (1 << 31)) & 0xFFFFFFFF))
+
+
+def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
+    """Cells (C, 2) int64 of a grid of ``cell_size`` metres whose centres lie inside a convex
+    counter-clockwise (K, 2) polygon (e.g. ``Cluster.footprint``); at least the cell of its
+    centroid, so tiny objects still have a footprint."""
+    poly = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
+    if len(poly) == 0:
+        return np.zeros((0, 2), np.int64)
+    lo = np.floor(poly.min(axis=0) / cell_size).astype(np.int64)
+    hi = np.floor(poly.max(axis=0) / cell_size).astype(np.int64)
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    cells = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    centre = (cells + 0.5) * cell_size
+    inside = np.ones(len(cells), bool)
+    if len(poly) >= 3:
+        for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):  # K edges, not cells
+            cross = (b[0] - a[0]) * (centre[:, 1] - a[1]) - (b[1] - a[1]) * (centre[:, 0] - a[0])
+            inside &= cross >= -1e-12
+    own = np.floor(poly.mean(axis=0) / cell_size).astype(np.int64)[None]
+    return np.unique(np.concatenate([cells[inside], own]), axis=0)
+
+
+def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
+    """Intersection-over-union of footprints: (len(a), len(b)) float64.
+
+    a, b: lists of packed cell arrays (:func:`pack_cells`). Vectorised over all cells: one
+    sort of the cells of ``b`` and a search of those of ``a``, no loop over pairs."""
+    na, nb = len(a), len(b)
+    iou = np.zeros((na, nb))
+    if na == 0 or nb == 0:
+        return iou
+    size_a = np.array([len(x) for x in a])
+    size_b = np.array([len(x) for x in b])
+    ca, la = np.concatenate(a), np.repeat(np.arange(na), size_a)
+    cb, lb = np.concatenate(b), np.repeat(np.arange(nb), size_b)
+    order = np.argsort(cb, kind="stable")
+    cb, lb = cb[order], lb[order]
+    # A cell can belong to several footprints of b (stacked shelf boards): expand ranges.
+    start = np.searchsorted(cb, ca, side="left")
+    stop = np.searchsorted(cb, ca, side="right")
+    n = stop - start
+    rows = np.repeat(la, n)
+    idx = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(start, n)
+    inter = np.zeros((na, nb))
+    np.add.at(inter, (rows, lb[idx]), 1.0)
+    union = size_a[:, None] + size_b[None, :] - inter
+    np.divide(inter, union, out=iou, where=union > 0)
+    return iou
+
+
+@dataclass
+class TrackUpdate:
+    """Result of one :meth:`OverlapTracker.update`.
+
+    ids: (D,) int64 stable id of each detection, in the order given.
+    new: ids that started with this update. gone: ids dropped after too many misses.
+    """
+
+    ids: np.ndarray
+    new: list[int] = field(default_factory=list)
+    gone: list[int] = field(default_factory=list)
+
+
+@dataclass
+class _Track:
+    id: int
+    cells: np.ndarray  # packed, sorted
+    height: float
+    group: int
+    misses: int = 0
+    hits: int = 1
+
+
+class OverlapTracker:
+    """Persistent ids for footprints on a fixed grid.
+
+    min_iou: smallest footprint IoU for a detection to continue a track.
+    height_tolerance: largest height difference (metres) between a track and its detection.
+    max_misses: consecutive updates a track may go unmatched before it is reported gone.
+    Detections and tracks may carry a ``group`` (e.g. the stable id of the surface a cluster
+    stands on); with ``match_groups`` only equal groups match.
+    """
+
+    def __init__(
+        self,
+        min_iou: float = 0.2,
+        height_tolerance: float = 0.05,
+        max_misses: int = 3,
+        match_groups: bool = False,
+    ) -> None:
+        if not 0.0 < min_iou <= 1.0 or max_misses < 1 or height_tolerance < 0:
+            raise InputError("need 0 < min_iou <= 1, max_misses >= 1, height_tolerance >= 0")
+        self.min_iou = float(min_iou)
+        self.height_tolerance = float(height_tolerance)
+        self.max_misses = int(max_misses)
+        self.match_groups = bool(match_groups)
+        self._tracks: list[_Track] = []
+        self._next_id = 0
+
+    @property
+    def tracks(self) -> dict[int, dict]:
+        """Live tracks by id: packed cells, height, misses, hits (copies of small fields)."""
+        return {
+            t.id: {"cells": t.cells, "height": t.height, "misses": t.misses, "hits": t.hits}
+            for t in self._tracks
+        }
+
+    def update(
+        self,
+        cells: list[np.ndarray],
+        heights: np.ndarray,
+        groups: np.ndarray | None = None,
+    ) -> TrackUpdate:
+        """Match one scan's detections to the tracks.
+
+        cells: per detection, (C, 2) int footprint cells on the tracker's fixed grid.
+        heights: (D,) float64 metres. groups: (D,) int or None.
+        """
+        heights = np.asarray(heights, dtype=np.float64).reshape(-1)
+        if len(cells) != len(heights):
+            raise InputError(f"{len(cells)} footprints but {len(heights)} heights")
+        d = len(cells)
+        grp = np.full(d, -1, np.int64) if groups is None else np.asarray(groups, np.int64)
+        packed = [pack_cells(c) for c in cells]
+        tracks = self._tracks
+        iou = overlap_matrix(packed, [t.cells for t in tracks])
+        t_height = np.array([t.height for t in tracks])
+        ok = iou >= self.min_iou
+        if len(tracks):
+            ok &= np.abs(heights[:, None] - t_height[None, :]) <= self.height_tolerance
+            if self.match_groups:
+                ok &= grp[:, None] == np.array([t.group for t in tracks])[None, :]
+        # Hungarian on IoU; pairs below the gates cost more than leaving both unmatched.
+        cost = np.where(ok, -iou, 1.0)
+        rows, cols = linear_sum_assignment(cost) if d and len(tracks) else ([], [])
+        ids = np.full(d, -1, np.int64)
+        matched = np.zeros(len(tracks), bool)
+        for r, c in zip(rows, cols, strict=True):  # at most min(D, T) pairs
+            if ok[r, c]:
+                t = tracks[c]
+                ids[r] = t.id
+                t.cells, t.height, t.group = packed[r], float(heights[r]), int(grp[r])
+                t.misses, t.hits = 0, t.hits + 1
+                matched[c] = True
+        out = TrackUpdate(ids)
+        for r in np.flatnonzero(ids < 0):  # new detections: a handful per scan
+            t = _Track(self._next_id, packed[r], float(heights[r]), int(grp[r]))
+            self._next_id += 1
+            tracks.append(t)
+            ids[r] = t.id
+            out.new.append(t.id)
+        keep = []
+        for i, t in enumerate(tracks):
+            if i < len(matched) and not matched[i]:
+                t.misses += 1
+                if t.misses >= self.max_misses:
+                    out.gone.append(t.id)
+                    continue
+            keep.append(t)
+        self._tracks = keep
+        return out
+
+
+class SurfaceTracker(OverlapTracker):
+    """Stable ids for :class:`~supportnode.geometry.surfaces.Surface` lists (footprint cells on
+    the detection grid ``Surface.cells``, height ``Surface.height``)."""
+
+    def update_surfaces(self, surfaces: list) -> TrackUpdate:
+        """surfaces: list of Surface (their ``cells`` must share one ``cell_size``)."""
+        sizes = {tuple(s.cell_size) for s in surfaces}
+        if len(sizes) > 1:
+            raise InputError(f"surfaces on different grids: {sorted(sizes)}")
+        return self.update([s.cells for s in surfaces], np.array([s.height for s in surfaces]))
+
+
+class ClusterTracker(OverlapTracker):
+    """Stable ids for :class:`~supportnode.geometry.objects.Cluster` lists: footprint polygons
+    rasterised on a ``cell_size`` grid, height = bottom of the bounding box; ``group`` = the
+    stable id of the surface under the cluster (-1 for none)."""
+
+    def __init__(self, cell_size: float = 0.02, **kw) -> None:
+        kw.setdefault("height_tolerance", 0.05)
+        super().__init__(**kw)
+        self.cell_size = float(cell_size)
+
+    def update_clusters(self, clusters: list, surface_ids: np.ndarray | None = None) -> TrackUpdate:
+        """clusters: list of Cluster; surface_ids: (D,) stable surface id under each (-1 none)."""
+        cells = [polygon_cells(c.footprint, self.cell_size) for c in clusters]
+        bottoms = np.array([float(c.bbox_min[2]) for c in clusters])
+        return self.update(cells, bottoms, surface_ids)

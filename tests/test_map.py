@@ -1,0 +1,220 @@
+"""Incremental voxel map: exact merging, forgetting, free-space clearing, detection through it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import plane_points
+
+from supportnode.errors import InputError
+from supportnode.geometry.voxels import voxelize
+from supportnode.node.map import KeyHash, VoxelMap, pack_keys, unpack_keys
+from supportnode.params import MapParams
+
+EYE = np.eye(4)
+
+
+def _pose(x=0.0, y=0.0, z=1.0, yaw_deg=0.0):
+    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    pose = np.eye(4)
+    pose[:2, :2] = [[c, -s], [s, c]]
+    pose[:3, 3] = [x, y, z]
+    return pose
+
+
+def _by_key(state):
+    order = np.lexsort(state["keys"].T[::-1])
+    return {k: v[order] for k, v in state.items()}
+
+
+def _no_clear(**kw):
+    return VoxelMap(MapParams(clear_free_space=False, max_age=0.0, **kw))
+
+
+def test_key_hash_insert_find_delete():
+    rng = np.random.default_rng(0)
+    keys = np.unique(rng.integers(0, 1 << 50, 50_000))
+    h = KeyHash(16)
+    h.insert(keys, np.arange(len(keys)))
+    assert np.array_equal(h.find(keys), np.arange(len(keys)))
+    assert (h.find(keys + (1 << 51)) == -1).all()
+    h.delete(keys[::3])
+    assert (h.find(keys[::3]) == -1).all()
+    rest = np.setdiff1d(np.arange(len(keys)), np.arange(0, len(keys), 3))
+    assert np.array_equal(h.find(keys[rest]), rest)
+    h.insert(keys[::3], np.arange(0, len(keys), 3))  # tombstones reused
+    assert np.array_equal(h.find(keys), np.arange(len(keys)))
+    assert h.size == len(keys)
+
+
+def test_pack_round_trip_and_range():
+    k = np.array([[0, 0, 0], [-5, 7, -1], [2**21 - 1, -(2**21), -(2**18)]])
+    assert np.array_equal(unpack_keys(pack_keys(k)), k)
+    with pytest.raises(InputError):
+        pack_keys(np.array([[0, 0, 2**18]]))
+
+
+def test_merge_is_exact_and_split_invariant(rng):
+    a = plane_points(rng, -2, 2, -2, 2, 0.31, 20_000)
+    b = plane_points(rng, -1, 3, -1, 3, 0.31, 20_000)
+    a[:, 2] += rng.normal(0, 0.004, len(a))
+    b[:, 2] += rng.normal(0, 0.004, len(b))
+    two = _no_clear()
+    two.integrate(a, EYE, 0.0, in_map_frame=True)
+    two.integrate(b, EYE, 0.1, in_map_frame=True)
+    grid = voxelize(np.r_[a, b], np.full(3, two.size))
+    got = _by_key(two.voxels())
+    want = _by_key(
+        {"keys": grid.keys, "count": grid.counts, "sums": grid.sums, "outer": grid.outer}
+    )
+    assert np.array_equal(got["keys"], want["keys"])
+    assert np.array_equal(got["count"], want["count"])
+    np.testing.assert_allclose(got["sums"], want["sums"], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got["outer"], want["outer"], rtol=1e-12, atol=1e-15)
+
+    # The same points in three parts, given in the sensor frame of a moved sensor.
+    pose = _pose(0.3, -0.2, 1.1, 25.0)
+    parts = _no_clear()
+    inv = np.linalg.inv(pose)
+    both = np.r_[a, b]
+    for i, chunk in enumerate(np.array_split(both, 3)):
+        parts.integrate(chunk @ inv[:3, :3].T + inv[:3, 3], pose, 0.1 * i)
+    got2 = _by_key(parts.voxels())
+    assert np.array_equal(got2["keys"], want["keys"])
+    np.testing.assert_allclose(got2["sums"], want["sums"], atol=1e-9)
+
+
+def test_precise_far_from_origin(rng):
+    """Moments relative to each voxel's corner: a plane 100 km away fits as well as near 0."""
+    pts = plane_points(rng, 0, 1, 0, 1, 0.02, 5000)
+    far = np.array([1.0e5, -4.0e4, 0.0])  # keys ~2e6: needs the 22-bit x, y range
+    m0, m1 = _no_clear(), _no_clear()
+    m0.integrate(pts, EYE, 0.0, in_map_frame=True)
+    m1.integrate(pts + far, _pose(*far), 0.0, in_map_frame=True)
+    v0, v1 = m0.voxels(), m1.voxels()
+    var0 = v0["outer"][:, 2] / v0["count"] - (v0["sums"][:, 2] / v0["count"]) ** 2
+    var1 = v1["outer"][:, 2] / v1["count"] - (v1["sums"][:, 2] / v1["count"]) ** 2
+    assert np.abs(var0).max() < 1e-15 and np.abs(var1).max() < 1e-12
+
+
+def test_crop_radius_age_and_cap(rng):
+    params = MapParams(radius=5.0, max_age=1.0, max_voxels=1000, clear_free_space=False)
+    m = VoxelMap(params, crop_slack=0.0, age_slack=0.0)
+    near = plane_points(rng, -1, 1, -1, 1, 0.0, 2000)  # 1600 voxels of 5 cm: over the cap
+    m.integrate(near[:400], _pose(), 0.0, in_map_frame=True)  # old ones
+    m.integrate(near[400:], _pose(), 0.5, in_map_frame=True)
+    st = m.stats()
+    assert st["voxels"] <= 1000 and st["dropped_cap"] > 0
+    # The oldest went first: what is left of stamp 0.0 is less than what is left of stamp 0.5.
+    seen = m.voxels()["last_seen"]
+    assert (seen == 0.5).sum() > 0.9 * st["voxels"]
+
+    m2 = VoxelMap(MapParams(radius=5.0, max_age=1.0, clear_free_space=False), crop_slack=0.0)
+    m2.integrate(plane_points(rng, -1, 1, -1, 1, 0.0, 500), _pose(), 0.0, in_map_frame=True)
+    m2.integrate(
+        plane_points(rng, 5.5, 6.5, -0.5, 0.5, 0.0, 500), _pose(x=3.0), 0.2, in_map_frame=True
+    )
+    # The sensor moves to x=7: the first patch (x in [-1, 1]) is beyond 5 m, the second not.
+    m2.integrate(np.zeros((0, 3)), _pose(x=7.0), 0.4, in_map_frame=True)
+    c = (m2.voxels()["keys"][:, :2] + 0.5) * m2.size
+    assert np.hypot(c[:, 0] - 7.0, c[:, 1]).max() <= 5.0
+    assert m2.stats()["dropped_radius"] > 0 and len(m2) > 200
+    # Age: nothing seen since 0.2 s; at 1.3 s everything is older than 1 s.
+    n = len(m2)
+    assert n > 0
+    m2.integrate(np.zeros((0, 3)), _pose(x=7.0), 1.3, in_map_frame=True)
+    assert len(m2) == 0 and m2.stats()["dropped_age"] == n
+
+
+def test_memory_flat_on_an_endless_run(rng):
+    """200 scans along a 200 m line: voxels and the store stop growing once the radius fills."""
+    m = VoxelMap(MapParams(radius=6.0, max_age=0.0, clear_free_space=False))
+    counts, caps = [], []
+    for i in range(200):
+        x = 1.0 * i
+        floor = plane_points(rng, x - 6, x + 6, -6, 6, 0.0, 4000)
+        m.integrate(floor, _pose(x=x), 0.1 * i, in_map_frame=True)
+        counts.append(len(m))
+        caps.append(m.stats()["capacity"])
+    # The disc of radius 6 m holds at most pi*6^2/0.05^2 ~ 45k columns (plus crop slack).
+    assert max(counts[100:]) < 1.15 * max(counts[20:40])
+    assert caps[-1] == caps[60]
+    assert m.stats()["dropped_radius"] > 0
+
+
+SCENE = """
+name: removed
+primitives:
+  - {kind: box, name: floor, size: [16, 16, 0.02], xyz: [0, 0, -0.01], role: surface, surface: floor}
+  - {kind: box, name: wall, size: [0.1, 6, 2.0], xyz: [3.0, 0, 1.0], role: structure}
+"""
+BOX = (
+    "  - {kind: box, name: box, size: [0.4, 0.4, 0.5], xyz: [1.5, 0, 0.25], role: object, "
+    "object: box}\n"
+)
+
+
+def test_removed_object_is_cleared_and_floor_stays():
+    """A box in scans 0-2 and gone from scans 3-7: it leaves the map within a few scans, while
+    the floor (under it, around it, and far away at grazing angles) stays."""
+    from supportnode.sim import Lidar, parse_scene
+    from supportnode.sim.noise import parse_noise
+    from supportnode.sim.simulate import finish
+
+    with_box, without = parse_scene(SCENE + BOX), parse_scene(SCENE)
+    lidar = Lidar(32, -25.0, 10.0, 720, 0.3, 30.0, 10.0)
+    noise = parse_noise(["range:0.01"])
+    m = VoxelMap(MapParams(radius=30.0, max_age=0.0), clear_rays=16384)
+    floor_seen: set[tuple[int, int, int]] = set()
+    in_box = []
+    for i in range(8):
+        scene = with_box if i < 3 else without
+        pose = _pose(0.0, 0.1 * i, 1.0, 3.0 * i)
+        cloud = finish(
+            lidar.scan(scene, pose, 0.1 * i), scene, noise, np.random.default_rng(i), "world"
+        )
+        floor = cloud.points[cloud.surface == 0].astype(np.float64)
+        floor_seen |= set(map(tuple, np.floor(floor / m.size).astype(np.int64)))
+        m.integrate(cloud.points, pose, 0.1 * i, in_map_frame=True)
+        c = (m.voxels()["keys"] + 0.5) * m.size
+        box = (np.abs(c[:, 0] - 1.5) < 0.25) & (np.abs(c[:, 1]) < 0.25) & (c[:, 2] > 0.06)
+        in_box.append(int(box.sum()))
+    assert in_box[2] > 80
+    assert in_box[-1] <= 0.1 * in_box[2], in_box  # ~5 % left after 5 scans, at most 10 %
+    kept = set(map(tuple, m.voxels()["keys"]))
+    lost = np.array([k for k in floor_seen if k not in kept]).reshape(-1, 3)
+    assert len(lost) <= 0.001 * len(floor_seen)
+    centre = (lost[:, :2] + 0.5) * m.size
+    assert not (np.hypot(centre[:, 0], centre[:, 1]) > 4.0).any()  # far floor at grazing angles
+    assert m.stats()["cleared"] > 0
+
+
+def test_detection_through_the_map_finds_floor_and_table():
+    from supportnode.pipeline import detect
+    from supportnode.sim import Lidar, load_scene, poses_for
+    from supportnode.sim.simulate import scans
+
+    scene = load_scene("table_chairs")
+    clouds = scans(scene, Lidar.preset("os128"), poses_for(scene, 4), seed=0)
+    m = VoxelMap(MapParams())
+    for c in clouds:
+        m.integrate(c.points, c.sensor_pose, c.stamp, in_map_frame=True)
+    det = detect(m.points(), objects=False, sensor_origin=clouds[-1].sensor_pose[:3, 3])
+    heights = sorted(s.height for s in det.surfaces.surfaces if s.area > 0.5)
+    assert any(abs(h) < 0.02 for h in heights), heights  # floor
+    assert any(0.68 < h < 0.76 for h in heights), heights  # table (top 0.75, panel 0.72)
+
+
+def test_bad_input_and_touched_region(rng):
+    m = _no_clear()
+    with pytest.raises(InputError):
+        m.integrate(np.zeros((3, 2)), EYE, 0.0)
+    with pytest.raises(InputError):
+        m.integrate(np.zeros((3, 3)), np.eye(3), 0.0)
+    pts = plane_points(rng, 0, 1, 0, 1, 0.0, 1000)
+    pts[:5] = np.nan  # a driver's misses are skipped and counted
+    touched = m.integrate(pts, EYE, 0.0, in_map_frame=True)
+    assert m.stats()["points_invalid"] == 5
+    assert len(touched.keys) == len(m)
+    assert np.all(touched.lo >= -1e-12) and np.all(touched.hi <= 1.0)
+    assert len(m.points(touched.keys)) == len(m.points())

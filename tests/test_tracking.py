@@ -1,0 +1,102 @@
+"""Stable ids by footprint overlap: jitter, new, gone, order independence, stacked boards."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from supportnode.errors import InputError
+from supportnode.node.tracking import (
+    ClusterTracker,
+    OverlapTracker,
+    overlap_matrix,
+    pack_cells,
+    polygon_cells,
+)
+
+
+def _rect(x0, y0, nx, ny):
+    gx, gy = np.meshgrid(np.arange(x0, x0 + nx), np.arange(y0, y0 + ny), indexing="ij")
+    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+
+
+def test_overlap_matrix_counts_shared_cells():
+    a = [pack_cells(_rect(0, 0, 10, 10)), pack_cells(_rect(100, 0, 2, 2))]
+    b = [pack_cells(_rect(5, 0, 10, 10)), pack_cells(_rect(0, 0, 10, 10))]
+    iou = overlap_matrix(a, b)
+    assert iou[0, 0] == pytest.approx(50 / 150)
+    assert iou[0, 1] == 1.0
+    assert (iou[1] == 0).all()
+
+
+def test_ids_stable_under_jitter_and_new_one_gets_new_id():
+    rng = np.random.default_rng(0)
+    tr = OverlapTracker(max_misses=3)
+    floor, table = _rect(-20, -20, 40, 40), _rect(0, 0, 16, 9)
+    first = tr.update([floor, table], [0.0, 0.75])
+    assert list(first.ids) == [0, 1] and first.new == [0, 1]
+    for _ in range(10):
+        dx = rng.integers(-1, 2, 2)
+        keep = rng.random(len(table)) > 0.2  # parts occluded
+        up = tr.update([floor + dx, table[keep] + dx], [rng.normal(0, 0.005), 0.75])
+        assert list(up.ids) == [0, 1] and not up.new and not up.gone
+    seat = _rect(30, 30, 4, 4)
+    up = tr.update([floor, table, seat], [0.0, 0.75, 0.45])
+    assert list(up.ids) == [0, 1, 2] and up.new == [2]
+
+
+def test_vanished_surface_is_gone_after_n_misses():
+    tr = OverlapTracker(max_misses=3)
+    floor, table = _rect(-20, -20, 40, 40), _rect(0, 0, 16, 9)
+    tr.update([floor, table], [0.0, 0.75])
+    gone = [tr.update([floor], [0.0]).gone for _ in range(4)]
+    assert gone == [[], [], [1], []]
+    # Back after a short absence (fewer misses than the limit): the same id.
+    tr2 = OverlapTracker(max_misses=3)
+    tr2.update([floor, table], [0.0, 0.75])
+    tr2.update([floor], [0.0])
+    assert list(tr2.update([floor, table], [0.0, 0.75]).ids) == [0, 1]
+    # Back after it was reported gone: a new id, never a reused one.
+    assert list(tr.update([floor, table], [0.0, 0.75]).ids) == [0, 2]
+
+
+def test_order_independent_and_stacked_boards_kept_apart():
+    """Three shelf boards share one footprint; height keeps them apart whatever the order."""
+    board = _rect(0, 0, 12, 4)
+    tr = OverlapTracker()
+    ids0 = tr.update([board, board, board], [0.4, 0.8, 1.2]).ids
+    perm = [2, 0, 1]
+    ids1 = tr.update([board[:-3], board[3:], board], np.array([0.4, 0.8, 1.2])[perm]).ids
+    assert list(ids1) == list(ids0[perm])
+    # Swapped order of two side-by-side surfaces at one height.
+    a, b = _rect(0, 0, 5, 5), _rect(10, 0, 5, 5)
+    tr2 = OverlapTracker()
+    first = tr2.update([a, b], [0.7, 0.7]).ids
+    assert list(tr2.update([b, a], [0.7, 0.7]).ids) == [first[1], first[0]]
+
+
+def test_height_gate_and_clusters():
+    tr = OverlapTracker(height_tolerance=0.05)
+    tr.update([_rect(0, 0, 5, 5)], [0.40])
+    up = tr.update([_rect(0, 0, 5, 5)], [0.60])  # same footprint, 20 cm higher: not the same
+    assert up.new == [1]
+
+    class C:  # the fields of Cluster the tracker reads
+        def __init__(self, x, z):
+            self.footprint = np.array([[x, 0.0], [x + 0.2, 0.0], [x + 0.2, 0.1], [x, 0.1]])
+            self.bbox_min = np.array([x, 0.0, z])
+
+    ct = ClusterTracker(cell_size=0.02, match_groups=True)
+    ids = ct.update_clusters([C(0.0, 0.75), C(0.5, 0.75)], np.array([1, 1])).ids
+    again = ct.update_clusters([C(0.51, 0.75), C(0.01, 0.75)], np.array([1, 1])).ids
+    assert list(again) == [ids[1], ids[0]]
+    moved = ct.update_clusters([C(0.0, 0.75)], np.array([2])).ids  # now on another surface
+    assert moved[0] not in ids
+
+
+def test_polygon_cells_and_bad_input():
+    sq = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
+    assert len(polygon_cells(sq, 0.02)) == 25
+    assert len(polygon_cells(np.array([[0.001, 0.001]]), 0.02)) == 1
+    with pytest.raises(InputError):
+        OverlapTracker().update([_rect(0, 0, 2, 2)], [0.0, 1.0])
