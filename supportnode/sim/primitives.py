@@ -57,6 +57,7 @@ def _nearest_positive(*ts: np.ndarray) -> np.ndarray:
     return stack.min(axis=0)
 
 
+@_quiet
 def _disc_hit(o: np.ndarray, d: np.ndarray, z: float, radius: float) -> np.ndarray:
     """t where rays cross the plane z inside a disc of `radius` about the z axis (else inf)."""
     t = (z - o[:, 2]) / d[:, 2]
@@ -65,6 +66,7 @@ def _disc_hit(o: np.ndarray, d: np.ndarray, z: float, radius: float) -> np.ndarr
     return np.where(x * x + y * y <= radius * radius, t, np.inf)
 
 
+@_quiet
 def _quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Both real roots of a t^2 + 2 b t + c = 0 (NaN where none). `a` near 0 gives the linear root."""
     sq = np.sqrt(b * b - a * c)
@@ -103,11 +105,11 @@ class Box:
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
         return signs * self.half
 
-    @_quiet
     def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
         """(N,) bool: shape-frame points (N, 3) inside the box grown by eps."""
         return np.all(np.abs(p) <= self.half + eps, axis=1)
 
+    @_quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Slab test: entry t (exit t when the origin is inside) and whether it is the +z face."""
         half = self.half
@@ -170,12 +172,12 @@ class Cylinder:
     def bounding_radius(self) -> float:
         return float(np.hypot(self.radius, self.height / 2.0))
 
-    @_quiet
     def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
         """(N,) bool: shape-frame points (N, 3) inside the cylinder grown by eps."""
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         return (r2 <= (self.radius + eps) ** 2) & (np.abs(p[:, 2]) <= self.height / 2.0 + eps)
 
+    @_quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, h2 = self.radius, self.height / 2.0
         a = d[:, 0] ** 2 + d[:, 1] ** 2
@@ -217,11 +219,11 @@ class Sphere:
     def bounding_radius(self) -> float:
         return float(self.radius)
 
-    @_quiet
     def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
         """(N,) bool: shape-frame points (N, 3) inside the sphere grown by eps."""
         return np.einsum("ij,ij->i", p, p) <= (self.radius + eps) ** 2
 
+    @_quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         b = np.einsum("ij,ij->i", o, d)
         c = np.einsum("ij,ij->i", o, o) - self.radius**2
@@ -251,7 +253,6 @@ class Cone:
     def bounding_radius(self) -> float:
         return float(np.hypot(self.radius, self.height / 2.0))
 
-    @_quiet
     def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
         """(N,) bool: shape-frame points (N, 3) inside the cone grown by eps (apex at +h/2)."""
         h = self.height
@@ -259,6 +260,7 @@ class Cone:
         r = np.sqrt(p[:, 0] ** 2 + p[:, 1] ** 2)
         return (r <= r_at + eps) & (np.abs(p[:, 2]) <= h / 2.0 + eps)
 
+    @_quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         h2 = self.height / 2.0
         k2 = (self.radius / self.height) ** 2
