@@ -70,21 +70,31 @@ class SurfaceParams:
         min=0.0,
     )
     bridge_cells: int = param(
-        1, "planar: empty cells a surface may span between level voxels of the same plane "
-        "(gaps between a lidar's rings far away); 0: only adjacent voxels join", min=0, max=5,
+        1,
+        "planar: empty cells a surface may span between level voxels of the same plane "
+        "(gaps between a lidar's rings far away); 0: only adjacent voxels join",
+        min=0,
+        max=5,
     )
     absorb_steps: int = param(
-        3, "planar: rings of cluttered voxels (a board's edge by a panel, the foot of an "
-        "object) a surface may grow into when part of their points lie on its plane", min=0,
+        3,
+        "planar: rings of cluttered voxels (a board's edge by a panel, the foot of an "
+        "object) a surface may grow into when part of their points lie on its plane",
+        min=0,
         max=50,
     )
     absorb_min_fraction: float = param(
-        0.2, "planar: share of a cluttered voxel's points that must lie on the plane for it "
-        "to join", min=0.0, max=1.0,
+        0.2,
+        "planar: share of a cluttered voxel's points that must lie on the plane for it to join",
+        min=0.0,
+        max=1.0,
     )
     clutter_normal_k: int = param(
-        10, "planar: neighbours for the normals that vet surface points in cluttered voxels "
-        "(tilted by more than normal_filter_max_tilt_deg: not on the surface)", min=3, max=100,
+        10,
+        "planar: neighbours for the normals that vet surface points in cluttered voxels "
+        "(tilted by more than normal_filter_max_tilt_deg: not on the surface)",
+        min=3,
+        max=100,
     )
     normal_filter: bool = param(
         False,
@@ -250,3 +260,8 @@ class NodeParams:
         5.0, "at most one log line per this period about rejected messages", "s", min=0.0
     )
     map: MapParams = field(default_factory=MapParams)
+    frame_id: str = param(
+        "map",
+        "frame of published results for scans with a pose: the map frame, rotated to gravity "
+        "when a correction applies (scans without a pose: their own frame_id)",
+    )

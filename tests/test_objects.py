@@ -9,7 +9,7 @@ import pytest
 
 from supportnode.errors import InputError
 from supportnode.geometry.objects import detect_objects
-from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.geometry.surfaces import Surface, SurfaceResult, detect_surfaces
 from supportnode.params import ObjectParams
 
 CELL = 0.1  # coarse surface footprint grid, as the surface detector uses
@@ -357,3 +357,18 @@ def test_object_touching_frame_beside_its_board_is_separate():
     on_board = next(c for c in res.clusters if c.surface_id == 1)
     assert on_board.point_count == len(b)
     assert on_board.height == pytest.approx(0.2)
+
+
+def test_flat_wall_cluster_has_a_line_footprint_and_a_thin_box():
+    """A noise-free wall has a collinear footprint (no 2-D hull): its box must come from the
+    line's two ends, not from a quadratic search over its 40k points."""
+    rng = np.random.default_rng(3)
+    n = 40_000
+    wall = np.c_[rng.uniform(0, 4, n), np.full(n, 2.0), rng.uniform(0.0, 2.0, n)]
+    floor = np.c_[rng.uniform(-1, 5, 30000), rng.uniform(-1, 1.9, 30000), np.zeros(30000)]
+    pts = np.vstack([floor, wall])
+    res = detect_objects(pts, detect_surfaces(pts), ObjectParams())
+    big = res.clusters[0]
+    assert big.point_count > 0.9 * n
+    assert big.obb_size[0] == pytest.approx(4.0, abs=0.05) and big.obb_size[1] < 0.01
+    assert len(big.footprint) == 2

@@ -21,7 +21,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "launch": ("supportnode.cli.launch", "start a launch file's processes, stop them in order"),
     "run": ("supportnode.cli.run", "run the node: scans in, surfaces and obstacles out"),
     "record": ("supportnode.cli.record", "record published messages into an MCAP file"),
-    "play": ("supportnode.cli.play", "publish a recording, ROS bag or cloud folder with its timing"),
+    "play": (
+        "supportnode.cli.play",
+        "publish a recording, ROS bag or cloud folder with its timing",
+    ),
     "info": ("supportnode.cli.info", "topics, counts, rates and sizes of a recording or bag"),
 }
 

@@ -491,7 +491,8 @@ def _make_cluster(cid: int, p: np.ndarray, lookups: list[_SupportLookup], tol: f
 
     xy = p[:, :2]
     footprint = _hull_2d(xy)
-    centre_xy, length, width, yaw = _oriented_rect(footprint if len(footprint) >= 3 else xy)
+    # The hull, never the raw points: the edge search is quadratic in its vertices.
+    centre_xy, length, width, yaw = _oriented_rect(footprint)
 
     return Cluster(
         id=cid,

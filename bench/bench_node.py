@@ -1,0 +1,267 @@
+"""Node benchmarks: stage latency, end-to-end latency over sockets, cost as the map grows,
+drops and memory at twice the input rate, accuracy and id switches on simulated sequences.
+
+    python bench/bench_node.py [--scene kitchen] [--frames 30] [--only stages,e2e,growth,rate,ids]
+
+Prints one JSON object per part. The lidar is the simulator's os128 (128 x 1024 = 131,072
+rays; a scan holds as many points as rays hit something).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import threading
+import time
+import warnings
+
+import numpy as np
+
+from supportnode.client import Publisher, Subscriber, SupportSurfaces, pose_from_matrix
+from supportnode.msgs import PointCloud
+from supportnode.node.node import Node
+from supportnode.sim import Lidar, load_scene, parse_scene, poses_for
+from supportnode.sim.scene import scene_path
+from supportnode.sim.simulate import scans
+
+warnings.filterwarnings("ignore", category=RuntimeWarning)
+
+
+# The kitchen with a front wall and a ceiling: every ray of the os128 hits, 131,072 points a scan.
+_CLOSE = """
+  - {kind: box, name: wall_front, size: [5.2, 0.1, 2.5], xyz: [0, -2.05, 1.25], role: structure}
+  - {kind: box, name: ceiling, size: [5.2, 4.2, 0.05], xyz: [0, 0, 2.525], role: structure}
+"""
+
+
+def scene_by_name(name: str):
+    """A bundled scene, or ``kitchen_closed`` (the kitchen closed on all sides)."""
+    if name == "kitchen_closed":
+        text = scene_path("kitchen").read_text(encoding="utf-8") + _CLOSE
+        return parse_scene(text, name="kitchen_closed")
+    return load_scene(name)
+
+
+def _cloud(s, stamp: float, seq: int) -> PointCloud:
+    return PointCloud.from_xyz(
+        s.points, stamp, "lidar", seq=seq, pose=pose_from_matrix(s.sensor_pose)
+    )
+
+
+def _pct(x) -> dict:
+    a = np.asarray(x, float) * 1e3
+    return {
+        "p50_ms": round(float(np.percentile(a, 50)), 1),
+        "p99_ms": round(float(np.percentile(a, 99)), 1),
+    }
+
+
+def stages(sc) -> dict:
+    """In-process: per-stage latency over the sequence (the first 3 scans warm up)."""
+    with Node() as node:
+        rows = [node.process(_cloud(s, 0.1 * i, i + 1)).timings for i, s in enumerate(sc)][3:]
+    keys = rows[0].keys()
+    return {
+        "points": int(np.mean([len(s) for s in sc])),
+        "stages": {k: _pct([r.get(k, 0.0) for r in rows]) for k in keys},
+    }
+
+
+def growth(sc, factor: int = 10) -> dict:
+    """Latency with the map the sequence builds, and with factor x as many voxels put in
+    first: up to 40 parallel walls 10 m long and 2.5 m high, 8 to 18 m away (inside the map
+    radius, apart from the scene). The first scans (full detection) are left out."""
+    out = {}
+    for extra in (False, True):
+        with Node() as node:
+            if extra:
+                target = factor * _base_voxels(sc)
+                rng = np.random.default_rng(0)
+                y, z = np.meshgrid(np.arange(-5, 5, 0.02), np.arange(0, 2.5, 0.02))
+                k = 0
+                while node.map.stats()["voxels"] < target and k < 40:
+                    # 1 cm thick: a wall of exactly collinear footprint makes objects.py's
+                    # oriented box allocate K x K (reported)
+                    x = 8.0 + 0.25 * k + rng.uniform(0, 0.01, y.size)
+                    wall = np.c_[x, y.ravel(), z.ravel()]
+                    # seen from straight above the wall: its rays cross no other wall
+                    above = np.eye(4)
+                    above[:3, 3] = (8.0 + 0.25 * k, 0.0, 20.0)
+                    node.map.integrate(wall, above, 0.0, in_map_frame=True)
+                    k += 1
+            t = [
+                node.process(_cloud(s, 0.1 * i, i + 1)).timings["total"] for i, s in enumerate(sc)
+            ][3:]
+            out["extra" if extra else "base"] = {"voxels": node.map.stats()["voxels"], **_pct(t)}
+    out["ratio_p50"] = round(out["extra"]["p50_ms"] / out["base"]["p50_ms"], 2)
+    return out
+
+
+def _base_voxels(sc) -> int:
+    from supportnode.node.map import VoxelMap
+
+    m = VoxelMap()
+    for i, s in enumerate(sc):
+        m.integrate(s.points, s.sensor_pose, 0.1 * i)
+    return len(m)
+
+
+def e2e(sc, rate: float, slow_consumer: float = 0.0) -> dict:
+    """Over sockets on 127.0.0.1: scans published at ``rate`` Hz, latency from publish to the
+    SupportSurfaces received (matched by stamp), drops, and the node's memory at the end."""
+    node = Node.__new__(Node)
+    from dataclasses import replace
+
+    from supportnode.params import DetectParams
+
+    p = DetectParams()
+    p = replace(
+        p,
+        node=replace(
+            p.node,
+            scan_endpoint="tcp://127.0.0.1:0",
+            pub_endpoint="tcp://127.0.0.1:*",
+            diagnostics_period=0.5,
+        ),
+    )
+    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=2)
+    p = replace(p, node=replace(p.node, scan_endpoint=pub.endpoint))
+    node = Node(p)
+    node.open()
+    th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+    th.start()
+    sub = Subscriber("surfaces", node.pub_endpoint, keep_newest=100)
+    time.sleep(0.5)
+    sent: dict[float, float] = {}
+    lat = []
+    n = len(sc)
+    rss = []
+    t0 = time.monotonic()
+    for i in range(3 * n):
+        s = sc[i % n]
+        stamp = 0.1 * i
+        sent[round(stamp, 6)] = time.perf_counter()
+        pub.publish(_cloud(s, stamp, i + 1))
+        next_t = t0 + (i + 1) / rate
+        while (left := next_t - time.monotonic()) > 0:
+            msg = sub.recv(left)
+            if isinstance(msg, SupportSurfaces):
+                lat.append(time.perf_counter() - sent[round(msg.stamp, 6)])
+                if slow_consumer:
+                    time.sleep(slow_consumer)
+        if i % n == 0:
+            rss.append(node.diagnostics().gauges["rss_mb"])
+    time.sleep(1.0)
+    d = node.diagnostics()
+    node.stop()
+    th.join(5)
+    node.close()
+    pub.close()
+    sub.close()
+    c = d.counters
+    return {
+        "rate_hz": rate,
+        "scans_sent": 3 * n,
+        "received": c["scans_received"],
+        "processed": c["scans_processed"],
+        "dropped": c["scans_dropped"],
+        "surfaces_received": len(lat),
+        "latency": _pct(lat) if lat else None,
+        "node_stages": {
+            k: {"p50_ms": round(v.p50 * 1e3, 1), "p99_ms": round(v.p99 * 1e3, 1)}
+            for k, v in d.latencies.items()
+        },
+        "rss_mb_per_pass": [round(x, 1) for x in rss] + [round(d.gauges["rss_mb"], 1)],
+    }
+
+
+def ids(scene_name: str, frames: int) -> dict:
+    """Accuracy and id switches on a simulated sequence. A ground-truth surface is found when
+    a published surface lies within 3 cm of its height and 1 m of its centre (the largest such
+    one counts); a ground-truth object when a published cluster's centroid is within 10 cm of
+    its centroid (x, y). An id switch: the id found for one ground-truth item changes between
+    two scans where it is found."""
+    scene = scene_by_name(scene_name)
+    sc = scans(scene, Lidar.preset("os128"), poses_for(scene, frames), seed=0, frame="sensor")
+    gt_s: dict[int, list[np.ndarray]] = {}
+    gt_o: dict[int, list[np.ndarray]] = {}
+    for s in sc:
+        w = s.points.astype(np.float64) @ s.sensor_pose[:3, :3].T + s.sensor_pose[:3, 3]
+        for sid in np.unique(s.surface[s.surface >= 0]):
+            gt_s.setdefault(int(sid), []).append(w[s.surface == sid])
+        for oid in np.unique(s.object[s.object >= 0]):
+            gt_o.setdefault(int(oid), []).append(w[s.object == oid])
+    sh = {k: float(np.median(np.concatenate(v)[:, 2])) for k, v in gt_s.items()}
+    sc_ = {k: np.concatenate(v)[:, :2].mean(axis=0) for k, v in gt_s.items()}
+    oc = {k: np.concatenate(v)[:, :2].mean(axis=0) for k, v in gt_o.items()}
+    s_ids: dict[int, list[int]] = {k: [] for k in gt_s}
+    o_ids: dict[int, list[int]] = {k: [] for k in gt_o}
+    s_found, o_found = [], []
+    with Node() as node:
+        for i, s in enumerate(sc):
+            out = node.process(_cloud(s, 0.1 * i, i + 1))
+            hits = 0
+            for k in gt_s:
+                best = [
+                    x
+                    for x in out.surfaces.surfaces
+                    if abs(x.height - sh[k]) < 0.03
+                    and np.all(np.abs(np.concatenate(x.outline).mean(axis=0) - sc_[k]) < 1.0)
+                ]
+                if best:
+                    s_ids[k].append(max(best, key=lambda x: x.area).id)
+                    hits += 1
+            s_found.append(hits / max(len(gt_s), 1))
+            hits = 0
+            for k in gt_o:
+                near = [
+                    c
+                    for c in out.obstacles.clusters
+                    if np.linalg.norm(c.centroid[:2] - oc[k]) < 0.10
+                ]
+                if near:
+                    o_ids[k].append(max(near, key=lambda c: c.point_count).id)
+                    hits += 1
+            o_found.append(hits / max(len(gt_o), 1))
+
+    def switches(d: dict[int, list[int]]) -> int:
+        return sum(int(np.sum(np.diff(v) != 0)) for v in d.values() if len(v) > 1)
+
+    return {
+        "scene": scene_name,
+        "frames": frames,
+        "gt_surfaces": len(gt_s),
+        "surface_recall_last": round(s_found[-1], 3),
+        "surface_recall_mean": round(float(np.mean(s_found)), 3),
+        "surface_id_switches": switches(s_ids),
+        "gt_objects": len(gt_o),
+        "object_recall_last": round(o_found[-1], 3),
+        "object_recall_mean": round(float(np.mean(o_found)), 3),
+        "object_id_switches": switches(o_ids),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="kitchen_closed")
+    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--only", default="stages,e2e,growth,rate,ids")
+    args = ap.parse_args()
+    parts = set(args.only.split(","))
+    scene = scene_by_name(args.scene)
+    sc = scans(scene, Lidar.preset("os128"), poses_for(scene, args.frames), seed=0, frame="sensor")
+    if "stages" in parts:
+        print(json.dumps({"stages": stages(sc)}), flush=True)
+    if "e2e" in parts:
+        print(json.dumps({"e2e_10hz": e2e(sc, 10.0)}), flush=True)
+    if "rate" in parts:
+        print(json.dumps({"e2e_20hz_slow_consumer": e2e(sc, 20.0, slow_consumer=0.05)}), flush=True)
+    if "growth" in parts:
+        print(json.dumps({"growth": growth(sc)}), flush=True)
+    if "ids" in parts:
+        for name in ("table_chairs", "kitchen", "shelf"):
+            print(json.dumps({"ids": ids(name, args.frames)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,170 @@
+"""Detection on the node's map: a full recompute, or only the region a scan touched.
+
+`regional` runs `pipeline.detect` on a crop of the map around what the scan changed and merges
+the result with the previous detection's items that lie entirely outside. It returns None
+(the caller then recomputes everything) whenever it cannot vouch that the merge equals a full
+recompute:
+
+- the region is closed over the previous items: any surface or cluster whose x, y box comes
+  within ``margin`` of it joins it, repeatedly, so every item the change may affect is redone
+  as a whole (a floor spanning the map makes the region the whole map: then the crop would
+  save nothing and None is returned);
+- the crop adds a context band of ``margin`` around the region; a new item that reaches into
+  that band may be cut by the crop, so the result is refused;
+- ``margin`` exceeds the reach of every local rule of the detection (voxel neighbourhoods,
+  gap bridging, clutter absorption, k-NN normals, object support), 0.5 m by default.
+
+Everything here is in the node's detection frame (map frame rotated to gravity). Pure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from supportnode.geometry.freespace import FreeSpace
+from supportnode.geometry.objects import Cluster
+from supportnode.geometry.surfaces import Surface
+from supportnode.params import DetectParams
+from supportnode.pipeline import detect
+
+__all__ = ["Items", "full", "regional"]
+
+# A crop holding at least this share of the map's points is not worth the bookkeeping.
+_MAX_CROP_SHARE = 0.8
+# Points of each cluster kept for the ObstacleClusters message.
+MAX_CLUSTER_POINTS = 64
+
+
+@dataclass
+class Items:
+    """One detection with consecutive ids: surface i has id i, cluster j id j; clusters'
+    ``surface_id`` and free spaces' ``surface_id`` refer to those ids."""
+
+    surfaces: list[Surface] = field(default_factory=list)
+    clusters: list[Cluster] = field(default_factory=list)
+    free: list[FreeSpace] = field(default_factory=list)
+    cluster_points: list[np.ndarray] = field(default_factory=list)  # (M, 3) float32 each
+    timings: dict[str, float] = field(default_factory=dict)
+    region: tuple[np.ndarray, np.ndarray] | None = None  # x, y box recomputed; None: all
+
+
+def _box(item: Surface | Cluster) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(item.bbox_min[:2], float), np.asarray(item.bbox_max[:2], float)
+
+
+def _meets(lo: np.ndarray, hi: np.ndarray, blo: np.ndarray, bhi: np.ndarray, m: float) -> bool:
+    """Do the x, y boxes [lo, hi] grown by m and [blo, bhi] intersect?"""
+    return bool(np.all(blo <= hi + m) and np.all(bhi >= lo - m))
+
+
+def _from_detection(points: np.ndarray, params: DetectParams, origin: np.ndarray | None) -> Items:
+    d = detect(points, params, sensor_origin=origin)
+    clusters = d.objects.clusters if d.objects is not None else []
+    labels = d.objects.labels if d.objects is not None else np.zeros(0, np.int32)
+    return Items(
+        surfaces=list(d.surfaces.surfaces),
+        clusters=list(clusters),
+        free=list(d.free_space),
+        cluster_points=_cluster_points(points, labels, len(clusters)),
+        timings=dict(d.timings),
+    )
+
+
+def _cluster_points(points: np.ndarray, labels: np.ndarray, n: int) -> list[np.ndarray]:
+    """Up to MAX_CLUSTER_POINTS evenly spaced points of each cluster (grouped in one sort)."""
+    if n == 0:
+        return []
+    on = np.flatnonzero(labels >= 0)
+    order = on[np.argsort(labels[on], kind="stable")]
+    bounds = np.searchsorted(labels[order], np.arange(n + 1))
+    out = []
+    for i in range(n):  # one slice per cluster, not per point
+        idx = order[bounds[i] : bounds[i + 1]]
+        if len(idx) > MAX_CLUSTER_POINTS:
+            idx = idx[np.linspace(0, len(idx) - 1, MAX_CLUSTER_POINTS).round().astype(np.int64)]
+        out.append(points[idx].astype(np.float32))
+    return out
+
+
+def full(points: np.ndarray, params: DetectParams, origin: np.ndarray | None = None) -> Items:
+    """Detection on all of ``points`` (N, 3), metres, z up."""
+    return _from_detection(points, params, origin)
+
+
+def regional(
+    points: np.ndarray,
+    previous: Items,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    params: DetectParams,
+    origin: np.ndarray | None = None,
+    margin: float = 0.5,
+) -> Items | None:
+    """Detection equal to ``full(points)`` when only the x, y box [lo, hi] (2,) changed since
+    ``previous`` was computed on the map; None when that cannot be guaranteed cheaply."""
+    lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
+        return None
+    boxes = [_box(s) for s in previous.surfaces] + [_box(c) for c in previous.clusters]
+    inside = np.zeros(len(boxes), bool)
+    grew = True
+    while grew:  # closure: a few rounds, each a loop over the (tens of) items
+        grew = False
+        for i, (blo, bhi) in enumerate(boxes):
+            if not inside[i] and _meets(lo, hi, blo, bhi, margin):
+                inside[i] = True
+                lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
+                grew = True
+    xy = points[:, :2]
+    in_crop = np.all((xy >= lo - 2 * margin) & (xy <= hi + 2 * margin), axis=1)
+    if in_crop.sum() >= _MAX_CROP_SHARE * len(points):
+        return None
+    new = _from_detection(points[in_crop], params, origin)
+    # New items meeting the region must lie within region + margin; items entirely in the
+    # context band are pieces of unchanged items, which `previous` holds whole.
+    keep_s = []
+    for s in new.surfaces:
+        blo, bhi = _box(s)
+        if not _meets(lo, hi, blo, bhi, margin):
+            continue
+        if np.any(blo < lo - margin) or np.any(bhi > hi + margin):
+            return None
+        keep_s.append(s)
+    keep_c = []
+    for j, c in enumerate(new.clusters):
+        blo, bhi = _box(c)
+        if not _meets(lo, hi, blo, bhi, margin):
+            continue
+        if np.any(blo < lo - margin) or np.any(bhi > hi + margin):
+            return None
+        keep_c.append(j)
+    n_prev_s = len(previous.surfaces)
+    old_s = [s for i, s in enumerate(previous.surfaces) if not inside[i]]
+    old_c = [j for j in range(len(previous.clusters)) if not inside[n_prev_s + j]]
+    # A kept cluster stands on a kept surface: its surface met the region only if it did.
+    out = Items(timings=new.timings, region=(lo, hi))
+    sid_old = {s.id: k for k, s in enumerate(old_s)}
+    sid_new = {s.id: len(old_s) + k for k, s in enumerate(keep_s)}
+    out.surfaces = [dataclasses.replace(s, id=k) for k, s in enumerate(old_s + keep_s)]
+    out.free = [
+        dataclasses.replace(f, surface_id=sid_old[f.surface_id])
+        for f in previous.free
+        if f.surface_id in sid_old
+    ]
+    out.free += [
+        dataclasses.replace(f, surface_id=sid_new[f.surface_id])
+        for f in new.free
+        if f.surface_id in sid_new
+    ]
+    for src, idx, sid in ((previous, old_c, sid_old), (new, keep_c, sid_new)):
+        for j in idx:
+            c = src.clusters[j]
+            if c.surface_id is not None and c.surface_id not in sid:
+                return None  # its surface was left out: the merge would be inconsistent
+            s = None if c.surface_id is None else sid[c.surface_id]
+            out.clusters.append(dataclasses.replace(c, id=len(out.clusters), surface_id=s))
+            out.cluster_points.append(src.cluster_points[j])
+    return out

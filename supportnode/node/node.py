@@ -1,0 +1,646 @@
+"""The node: scans in, support surfaces and the obstacles on them out, with diagnostics.
+
+Data path of one scan: socket -> decode and validate -> gravity (given or estimated) -> voxel map
+merge through the pose -> detection on the region the scan touched -> stable ids -> encode ->
+socket. `Node.process` is that path without sockets (tests and embedding); `Node.spin` adds the
+sockets, keep-newest input, the diagnostics timer and clean shutdown on SIGINT/SIGTERM.
+
+    with Node(load_config("config/default.yaml")) as node:
+        out = node.process(cloud)            # NodeOutput: SupportSurfaces, ObstacleClusters
+    with Node(params) as node:
+        node.spin()                          # until SIGINT/SIGTERM or node.stop()
+
+Frames: a scan's points are in its cloud frame; its ``pose`` takes them to the map frame (no
+pose: the cloud frame is the map frame, a static sensor). Results are published in the map frame
+rotated by the gravity correction (identity when the map frame is already z-up), named
+``NodeParams.frame_id`` (the cloud's ``frame_id`` for scans without a pose).
+
+A surface is ``safe`` when all hold: footprint area >= 0.10 m^2, flatness (rms distance to its
+plane) <= 1 cm, normal within 5 deg of up, and seen in at least 2 detections in a row under
+the same id (one scan's glimpse is not enough to put something down on).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any, Protocol
+
+import numpy as np
+import zmq
+
+from supportnode import bus
+from supportnode.errors import AlignmentError, InputError, ProtocolError, SupportNodeError
+from supportnode.geometry.gravity import estimate_gravity, rotation_to_z
+from supportnode.msgs import (
+    Diagnostics,
+    Limits,
+    ObstacleClusters,
+    PointCloud,
+    SupportSurfaces,
+    decode_any,
+)
+from supportnode.node import incremental
+from supportnode.node.incremental import Items
+from supportnode.node.latency import LatencyWindow, RateLimitedLog
+from supportnode.node.map import VoxelMap
+from supportnode.node.tracking import ClusterTracker, SurfaceTracker
+from supportnode.params import DetectParams
+
+__all__ = ["MapLike", "Node", "NodeOutput", "quaternion_matrix"]
+
+log = logging.getLogger("supportnode.node")
+
+# Safety rule of a surface (see the module docstring).
+SAFE_MIN_AREA = 0.10  # m^2
+SAFE_MAX_FLATNESS = 0.01  # m
+SAFE_MAX_TILT_DEG = 5.0
+SAFE_MIN_HITS = 2
+# Gravity estimation without an IMU: every scan at first, then every this many scans.
+_GRAVITY_WARMUP = 5
+_GRAVITY_EVERY = 10
+# A scan stamped this much before the previous one means the source restarted (a replay that
+# loops, a driver restart): the map and ids start over rather than mixing two timelines.
+_TIME_JUMP = 1e-3
+# How long one wait for a scan lasts in spin: bounds the reaction time to a stop request.
+_POLL_S = 0.05
+
+
+class MapLike(Protocol):
+    """What the node needs of a map (`supportnode.node.map.VoxelMap`)."""
+
+    def integrate(self, points: np.ndarray, pose: np.ndarray, stamp: float) -> Any: ...
+    def points(self) -> np.ndarray: ...
+    def stats(self) -> dict[str, int]: ...
+
+
+@dataclass
+class NodeOutput:
+    """What one scan produced.
+
+    surfaces, obstacles: the messages to publish; None when the scan only updated the map
+    (``node.detection_rate``). timings: seconds per stage (gravity, map, points, surfaces,
+    objects, free_space, track, messages, total). new_ids / gone_ids: stable ids that appeared /
+    vanished, per kind ("surfaces", "obstacles"). incremental: detection ran on a crop of the map.
+    items: the detection behind the messages (detection ids, not stable ids).
+    """
+
+    surfaces: SupportSurfaces | None
+    obstacles: ObstacleClusters | None
+    timings: dict[str, float] = field(default_factory=dict)
+    new_ids: dict[str, list[int]] = field(default_factory=dict)
+    gone_ids: dict[str, list[int]] = field(default_factory=dict)
+    incremental: bool = False
+    items: Items | None = None
+
+
+def quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation of the unit quaternion ``q`` = (x, y, z, w)."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+class _Gravity:
+    """The up direction in the map frame and the correction rotation it implies.
+
+    Given per scan (``imu_orientation`` or ``gravity``): used as is. Otherwise, when
+    ``gravity.enabled``: estimated from the scan's normals and averaged over scans (weighted by
+    inliers), so the correction settles instead of jittering scan to scan.
+    """
+
+    def __init__(self, params: DetectParams) -> None:
+        self.params = params.gravity
+        self.up = np.array([0.0, 0.0, 1.0])
+        self.source = "none"  # none | given | estimated
+        self._sum = np.zeros(3)
+        self._estimates = 0
+        self._scans = 0
+        self.failures = 0
+
+    def update(self, cloud: PointCloud, rotation: np.ndarray, points: np.ndarray) -> None:
+        """Update from one scan; ``rotation``: (3, 3) cloud-to-map, ``points``: cloud frame."""
+        self._scans += 1
+        up_cloud = None
+        if cloud.imu_orientation is not None:
+            up_cloud = quaternion_matrix(cloud.imu_orientation).T @ np.array([0.0, 0.0, 1.0])
+        elif cloud.gravity is not None:
+            up_cloud = -cloud.gravity / np.linalg.norm(cloud.gravity)
+        if up_cloud is not None:
+            self.up, self.source = rotation @ up_cloud, "given"
+            return
+        if not self.params.enabled or self.source == "given":
+            return
+        due = self._estimates < _GRAVITY_WARMUP or self._scans % _GRAVITY_EVERY == 0
+        if not due:
+            return
+        try:
+            est = estimate_gravity(points, self.params)
+        except AlignmentError:
+            self.failures += 1
+            return
+        self._estimates += 1
+        self._sum += max(est.inliers, 1) * (rotation @ est.up)
+        self.up, self.source = self._sum / np.linalg.norm(self._sum), "estimated"
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) map frame -> detection frame (z up)."""
+        return rotation_to_z(self.up)
+
+    @property
+    def tilt_deg(self) -> float:
+        return float(np.degrees(np.arccos(np.clip(self.up[2], -1.0, 1.0))))
+
+
+class Node:
+    """The support-surface node (see the module docstring).
+
+    params: the whole configuration (`DetectParams`; its ``node`` section for the node).
+    voxel_map, surface_tracker, cluster_tracker: injected parts (defaults: `VoxelMap`,
+    `SurfaceTracker`, `ClusterTracker`); made again by `reset`, so pass factories if needed.
+    incremental: detect only on the region a scan touched when that equals a full recompute.
+    context: ZeroMQ context for the sockets (default: the shared instance).
+    """
+
+    def __init__(
+        self,
+        params: DetectParams | None = None,
+        *,
+        map_factory: Callable[[], MapLike] | None = None,
+        incremental: bool = True,
+        context: zmq.Context | None = None,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.params = params or DetectParams()
+        self.cfg = self.params.node
+        self.incremental = incremental
+        self.log = logger or log
+        self._map_factory = map_factory or (lambda: VoxelMap(self.cfg.map))
+        self._context = context
+        self.limits = Limits(
+            max_points=self.cfg.max_points, max_message_bytes=self.cfg.max_message_bytes
+        )
+        self.latency = LatencyWindow()
+        self.counters: dict[str, int] = {
+            "scans_received": 0,
+            "scans_processed": 0,
+            "scans_dropped": 0,
+            "scans_rejected": 0,
+            "detections": 0,
+            "incremental_detections": 0,
+            "time_jumps": 0,
+            "points_nonfinite": 0,
+            "seq_gaps": 0,
+            "gravity_failures": 0,
+            "diagnostics_sent": 0,
+        }
+        self.rejects: dict[str, int] = {}
+        self.last_reject = ""
+        self._reject_log = RateLimitedLog(self.log, self.cfg.reject_log_period)
+        self._sub: bus.Subscriber | None = None
+        self._pub: bus.Publisher | None = None
+        self._stop = threading.Event()
+        self._diag_seq = 0
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+
+    def reset(self) -> None:
+        """Forget the map, the ids and the previous detection (the gravity estimate stays)."""
+        self.map: MapLike = self._map_factory()
+        self.surface_tracker = SurfaceTracker(min_iou=0.2, height_tolerance=0.05, max_misses=3)
+        self.cluster_tracker = ClusterTracker(cell_size=0.02, min_iou=0.2, max_misses=3)
+        if not hasattr(self, "gravity"):
+            self.gravity = _Gravity(self.params)
+        self._items: Items | None = None
+        self._items_rotation: np.ndarray | None = None
+        self._last_stamp: float | None = None
+        self._last_detect: float | None = None
+        self._last_seq: int | None = None
+        self._out_seq = 0
+        self._last_counts = (0, 0)
+        self._pending: tuple[np.ndarray, np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ in-process
+
+    def process(self, cloud: PointCloud) -> NodeOutput:
+        """Run one scan through gravity, map, detection and tracking; returns the messages.
+
+        Raises InputError for a scan the node cannot use (no points); the map is then unchanged.
+        """
+        t_start = time.perf_counter()
+        timings: dict[str, float] = {}
+        if cloud.count == 0:
+            raise InputError("scan has no finite points")
+        stamp = float(cloud.stamp)
+        if self._last_stamp is not None and stamp < self._last_stamp - _TIME_JUMP:
+            self.counters["time_jumps"] += 1
+            self.log.warning(
+                "scan stamp %.3f is before the previous %.3f: source restarted, map reset",
+                stamp,
+                self._last_stamp,
+            )
+            self.reset()
+        if self._last_seq is not None and cloud.seq > self._last_seq + 1:
+            self.counters["seq_gaps"] += cloud.seq - self._last_seq - 1
+        self._last_seq = cloud.seq
+        self.counters["points_nonfinite"] += int(cloud.dropped_nonfinite)
+        pose = np.eye(4)
+        if cloud.pose is not None:
+            pose[:3, :3] = quaternion_matrix(cloud.pose.rotation)
+            pose[:3, 3] = cloud.pose.translation
+        points = cloud.points
+
+        t = time.perf_counter()
+        failures = self.gravity.failures
+        self.gravity.update(cloud, pose[:3, :3], points)
+        self.counters["gravity_failures"] += self.gravity.failures - failures
+        timings["gravity"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        touched = self.map.integrate(points, pose, stamp)
+        self._last_stamp = stamp
+        timings["map"] = time.perf_counter() - t
+
+        rate = self.cfg.detection_rate
+        due = (
+            rate <= 0 or self._last_detect is None or stamp - self._last_detect >= 1.0 / rate - 1e-6
+        )
+        frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
+        if not due:
+            # The region touched by skipped scans must be redone at the next detection.
+            self._pending_region(touched)
+            timings["total"] = time.perf_counter() - t_start
+            self.counters["scans_processed"] += 1
+            self.latency.add_all(timings)
+            return NodeOutput(None, None, timings)
+        self._last_detect = stamp
+        out = self._detect(touched, pose, stamp, frame, timings)
+        timings["total"] = time.perf_counter() - t_start
+        self.counters["scans_processed"] += 1
+        self.latency.add_all(timings)
+        return out
+
+    def _touched_box(self, touched: Any, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """x, y box in the detection frame of what ``touched`` (map frame) changed."""
+        lo, hi = np.asarray(touched.lo, float), np.asarray(touched.hi, float)
+        corners = []
+        if np.all(lo <= hi):
+            corners.append(np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T)
+        removed = np.asarray(getattr(touched, "removed", np.zeros((0, 3))), float)
+        if len(removed):
+            size = float(self.cfg.map.voxel_size)
+            rlo, rhi = removed.min(axis=0) * size, (removed.max(axis=0) + 1) * size
+            corners.append(np.array(np.meshgrid(*zip(rlo, rhi, strict=True))).reshape(3, -1).T)
+        if not corners:
+            return np.full(2, np.inf), np.full(2, -np.inf)
+        c = np.concatenate(corners) @ rotation.T
+        return c[:, :2].min(axis=0), c[:, :2].max(axis=0)
+
+    def _pending_region(self, touched: Any) -> None:
+        lo, hi = self._touched_box(touched, self.gravity.rotation)
+        if self._pending is not None:
+            lo, hi = np.minimum(lo, self._pending[0]), np.maximum(hi, self._pending[1])
+        self._pending = (lo, hi)
+
+    def _detect(
+        self,
+        touched: Any,
+        pose: np.ndarray,
+        stamp: float,
+        frame: str,
+        timings: dict[str, float],
+    ) -> NodeOutput:
+        rotation = self.gravity.rotation
+        t = time.perf_counter()
+        points = self.map.points() @ rotation.T
+        timings["points"] = time.perf_counter() - t
+        # Not the sensor origin: the map holds points seen from many places, and the rule
+        # "planes above the sensor are undersides" is applied below to every surface alike.
+        items = None
+        lo, hi = self._touched_box(touched, rotation)
+        if self._pending is not None:
+            lo, hi = np.minimum(lo, self._pending[0]), np.maximum(hi, self._pending[1])
+            self._pending = None
+        same_frame = self._items_rotation is not None and np.allclose(
+            self._items_rotation, rotation, atol=1e-9
+        )
+        if self.incremental and self._items is not None and same_frame:
+            items = incremental.regional(points, self._items, lo, hi, self.params)
+        is_incremental = items is not None
+        if items is None:
+            items = incremental.full(points, self.params)
+        self._items, self._items_rotation = items, rotation
+        timings.update({k: v for k, v in items.timings.items()})
+        self.counters["detections"] += 1
+        self.counters["incremental_detections"] += int(is_incremental)
+        sensor_z = float((rotation @ pose[:3, 3])[2])
+        return self._messages(items, sensor_z, stamp, frame, timings, is_incremental)
+
+    def _messages(
+        self,
+        items: Items,
+        sensor_z: float,
+        stamp: float,
+        frame: str,
+        timings: dict[str, float],
+        is_incremental: bool,
+    ) -> NodeOutput:
+        t = time.perf_counter()
+        # Horizontal planes above the sensor are ceilings and undersides, not supports.
+        keep = [s for s in items.surfaces if s.height < sensor_z - 0.05]
+        kept_ids = {s.id for s in keep}
+        s_up = self.surface_tracker.update_surfaces(keep)
+        sid = {s.id: int(i) for s, i in zip(keep, s_up.ids, strict=True)}
+        surface_of = np.array(
+            [sid.get(c.surface_id, -1) if c.surface_id is not None else -1 for c in items.clusters],
+            dtype=np.int64,
+        )
+        c_up = self.cluster_tracker.update_clusters(items.clusters, surface_of)
+        timings["track"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        tracks = self.surface_tracker.tracks
+        safe = [
+            _is_safe(s, tracks.get(int(i), {}).get("hits", 0))
+            for s, i in zip(keep, s_up.ids, strict=True)
+        ]
+        self._out_seq += 1
+        free = [f for f in items.free if f.surface_id in kept_ids]
+        surfaces = SupportSurfaces.from_detection(
+            keep, free, stamp, frame, self._out_seq, ids=[int(i) for i in s_up.ids], safe=safe
+        )
+        clusters = [
+            c if c.surface_id is None or c.surface_id in kept_ids else _unsupported(c)
+            for c in items.clusters
+        ]
+        obstacles = ObstacleClusters.from_detection(
+            clusters,
+            stamp,
+            frame,
+            self._out_seq,
+            ids=[int(i) for i in c_up.ids],
+            surface_ids=sid,
+            points=items.cluster_points,
+        )
+        timings["messages"] = time.perf_counter() - t
+        self._last_counts = (len(keep), len(clusters))
+        return NodeOutput(
+            surfaces,
+            obstacles,
+            timings,
+            new_ids={"surfaces": list(s_up.new), "obstacles": list(c_up.new)},
+            gone_ids={"surfaces": list(s_up.gone), "obstacles": list(c_up.gone)},
+            incremental=is_incremental,
+            items=items,
+        )
+
+    # ------------------------------------------------------------------ wire
+
+    def handle(self, frames: Any) -> NodeOutput | None:
+        """Decode one received message and process it; a message the node cannot use is
+        counted in ``rejects`` by reason, logged (rate-limited) and None is returned."""
+        t = time.perf_counter()
+        try:
+            msg = decode_any(frames, self.limits)
+        except ProtocolError as err:
+            self._reject(_reason(str(err)), str(err))
+            return None
+        if not isinstance(msg, PointCloud):
+            self._reject("wrong_type", f"expected a PointCloud on the scan topic, got {msg.TYPE}")
+            return None
+        decode = time.perf_counter() - t
+        try:
+            out = self.process(msg)
+        except SupportNodeError as err:
+            self._reject("unusable", f"scan seq {msg.seq}: {err}")
+            return None
+        except Exception as err:
+            self.log.exception("scan seq %s: internal error", msg.seq)
+            self._reject("internal_error", f"scan seq {msg.seq}: {type(err).__name__}: {err}")
+            return None
+        out.timings["decode"] = decode
+        self.latency.add("decode", decode)
+        return out
+
+    def _reject(self, reason: str, text: str) -> None:
+        self.counters["scans_rejected"] += 1
+        self.rejects[reason] = self.rejects.get(reason, 0) + 1
+        self.last_reject = text
+        self._reject_log.warning(f"{self.cfg.name}: rejected a scan ({reason}): {text}")
+
+    def open(self) -> None:
+        """Create the sockets (done by `spin`; in-process use needs none)."""
+        if self._sub is not None:
+            return
+        self._pub = bus.Publisher(
+            self.cfg.pub_endpoint, bind=self.cfg.pub_bind, context=self._context, hwm=10
+        )
+        try:
+            self._sub = bus.Subscriber(
+                self.cfg.scan_endpoint,
+                self.cfg.scan_topic,
+                bind=self.cfg.scan_bind,
+                keep_newest=self.cfg.queue,
+                context=self._context,
+                max_message_bytes=self.cfg.max_message_bytes,
+            )
+        except BaseException:
+            self._pub.close()
+            self._pub = None
+            raise
+
+    @property
+    def pub_endpoint(self) -> str:
+        """Resolved result endpoint (the real port after binding ``tcp://host:*``)."""
+        return self._pub.endpoint if self._pub is not None else self.cfg.pub_endpoint
+
+    @property
+    def scan_endpoint(self) -> str:
+        """Resolved scan endpoint."""
+        return self._sub.endpoint if self._sub is not None else self.cfg.scan_endpoint
+
+    def stop(self) -> None:
+        """Ask `spin` to return (thread-safe, and safe from a signal handler)."""
+        self._stop.set()
+
+    def spin(self, duration: float | None = None, handle_signals: bool = True) -> None:
+        """Receive scans and publish results until `stop`, SIGINT/SIGTERM or ``duration`` s.
+
+        Keeps only the newest ``node.queue`` scans when processing falls behind; publishes
+        Diagnostics every ``node.diagnostics_period`` seconds. Signal handlers are installed
+        only from the main thread, and restored on return.
+        """
+        self.open()
+        assert self._sub is not None and self._pub is not None
+        restore: dict[int, Any] = {}
+        if handle_signals and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                restore[sig] = signal.signal(sig, lambda *_: self._stop.set())
+        self._stop.clear()
+        end = None if duration is None else time.monotonic() + duration
+        period = self.cfg.diagnostics_period
+        next_diag = time.monotonic() + period
+        self.log.info(
+            "%s: scans from %s (topic %s), results on %s",
+            self.cfg.name,
+            self.scan_endpoint,
+            self.cfg.scan_topic,
+            self.pub_endpoint,
+        )
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if end is not None and now >= end:
+                    break
+                wait = min(_POLL_S, max(0.0, next_diag - now))
+                oversized = self._sub.oversized
+                frames = self._sub.recv(wait)
+                if self._sub.oversized != oversized:
+                    for _ in range(self._sub.oversized - oversized):
+                        size = self._sub.last_oversized[1] if self._sub.last_oversized else 0
+                        self._reject(
+                            "oversized",
+                            f"message of {size} bytes exceeds max_message_bytes "
+                            f"{self.cfg.max_message_bytes}",
+                        )
+                if frames is not None:
+                    t_recv = time.perf_counter()
+                    out = self.handle(frames)
+                    if out is not None and out.surfaces is not None:
+                        self._publish(out, t_recv)
+                if time.monotonic() >= next_diag:
+                    self.publish_diagnostics()
+                    next_diag = time.monotonic() + period
+        finally:
+            for sig, old in restore.items():
+                signal.signal(sig, old)
+
+    def _publish(self, out: NodeOutput, t_recv: float) -> None:
+        assert self._pub is not None and out.surfaces is not None and out.obstacles is not None
+        t = time.perf_counter()
+        # Surfaces last: a planner that reacts to surfaces then already has their obstacles.
+        self._pub.send(out.obstacles.encode(self.cfg.obstacles_topic))
+        self._pub.send(out.surfaces.encode(self.cfg.surfaces_topic))
+        out.timings["publish"] = time.perf_counter() - t
+        self.latency.add("publish", out.timings["publish"])
+        self.latency.add("receive_to_publish", time.perf_counter() - t_recv)
+
+    def diagnostics(self) -> Diagnostics:
+        """The current Diagnostics message (counters, latencies, gauges, status)."""
+        if self._sub is not None:
+            self.counters["scans_received"] = self._sub.received
+            self.counters["scans_dropped"] = self._sub.dropped
+        counters = dict(self.counters)
+        counters.update({f"rejected_{k}": v for k, v in self.rejects.items()})
+        stats = self.map.stats()
+        counters.update({f"map_{k}": int(v) for k, v in stats.items()})
+        up = self.gravity.up
+        gauges = {
+            "map_voxels": float(stats.get("voxels", 0)),
+            "surfaces": float(self._last_counts[0]),
+            "obstacles": float(self._last_counts[1]),
+            "gravity_tilt_deg": self.gravity.tilt_deg,
+            "gravity_up_x": float(up[0]),
+            "gravity_up_y": float(up[1]),
+            "gravity_up_z": float(up[2]),
+            "gravity_source": float(("none", "given", "estimated").index(self.gravity.source)),
+            "rss_mb": _rss_mb(),
+        }
+        level, message = "ok", ""
+        if self.counters["scans_processed"] == 0:
+            level, message = "warn", f"no scans processed yet on topic {self.cfg.scan_topic}"
+        if self.last_reject:
+            level, message = "warn", f"last reject: {self.last_reject}"[:500]
+        self._diag_seq += 1
+        return Diagnostics(
+            stamp=time.time(),
+            node=self.cfg.name,
+            level=level,
+            message=message,
+            counters=counters,
+            latencies=self.latency.stats(),
+            gauges={k: v for k, v in gauges.items() if math.isfinite(v)},
+            seq=self._diag_seq,
+        )
+
+    def publish_diagnostics(self) -> Diagnostics:
+        """Send the current Diagnostics (sockets must be open); returns it."""
+        if self._pub is None:
+            raise InputError("publish_diagnostics needs open sockets (call open() or spin())")
+        msg = self.diagnostics()
+        self._pub.send(msg.encode(self.cfg.diagnostics_topic))
+        self.counters["diagnostics_sent"] += 1
+        self.last_reject = ""
+        return msg
+
+    def close(self) -> None:
+        """Close the sockets (idempotent)."""
+        for s in (self._sub, self._pub):
+            if s is not None:
+                s.close()
+        self._sub = self._pub = None
+
+    def __enter__(self) -> Node:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _is_safe(s: Any, hits: int) -> bool:
+    tilt = math.degrees(math.acos(min(1.0, abs(float(s.normal[2])))))
+    return (
+        s.area >= SAFE_MIN_AREA
+        and s.flatness <= SAFE_MAX_FLATNESS
+        and tilt <= SAFE_MAX_TILT_DEG
+        and hits >= SAFE_MIN_HITS
+    )
+
+
+def _unsupported(c: Any) -> Any:
+    import dataclasses
+
+    return dataclasses.replace(c, surface_id=None)
+
+
+def _reason(text: str) -> str:
+    """Short reject reason of a ProtocolError text, for the counters."""
+    if "schema version" in text:
+        return "version"
+    if "max_points" in text:
+        return "too_many_points"
+    if "max_message_bytes" in text:
+        return "oversized"
+    if "NaN" in text or "finite" in text:
+        return "nonfinite"
+    return "malformed"
+
+
+def _rss_mb() -> float:
+    """Resident memory of this process in MiB (Linux /proc; peak RSS elsewhere)."""
+    try:
+        with open(f"/proc/{os.getpid()}/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

@@ -1,0 +1,208 @@
+"""The node in-process: gravity, map, detection, ids, rejects (no sockets)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import box_points, plane_points
+
+from supportnode.client import pose_from_matrix
+from supportnode.errors import InputError
+from supportnode.msgs import PointCloud
+from supportnode.node.node import Node, quaternion_matrix
+from supportnode.params import DetectParams
+
+
+def _platform(rng, cx, cy, z=0.5, n=6000):
+    """A 1.2 x 0.8 m horizontal board at height z, with its edges (no floor under it)."""
+    return plane_points(rng, cx - 0.6, cx + 0.6, cy - 0.4, cy + 0.4, z, n)
+
+
+def _cloud(points, stamp, seq=0, pose=None, **kw):
+    pose = np.eye(4) if pose is None else pose
+    return PointCloud.from_xyz(points, stamp, "lidar", seq=seq, pose=pose_from_matrix(pose), **kw)
+
+
+def _sensor_pose(x, y, z):
+    p = np.eye(4)
+    p[:3, 3] = (x, y, z)
+    return p
+
+
+def _summary(out):
+    s = sorted((round(x.height, 6), round(x.area, 6), x.point_count) for x in out.surfaces.surfaces)
+    c = sorted((tuple(np.round(x.centroid, 6)), x.point_count) for x in out.obstacles.clusters)
+    return s, c
+
+
+def test_surfaces_heights_and_obstacle_on_them(rng):
+    pts = np.vstack([_platform(rng, 0, 0), box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)])
+    pose = _sensor_pose(0, 0, 1.5)
+    with Node() as node:
+        out = node.process(_cloud(pts - pose[:3, 3], 1.0, pose=pose))
+    assert [round(s.height, 2) for s in out.surfaces.surfaces] == [0.5]
+    assert out.surfaces.frame_id == "map"
+    assert len(out.obstacles.clusters) == 1
+    c = out.obstacles.clusters[0]
+    assert c.surface_id == out.surfaces.surfaces[0].id
+    assert c.height == pytest.approx(0.2, abs=0.03)
+    assert c.points is not None and 0 < len(c.points) <= 64
+
+
+def test_stable_ids_and_safe_after_two_scans(rng):
+    pose = _sensor_pose(0, 0, 1.5)
+    ids, safe = [], []
+    with Node() as node:
+        for i in range(4):
+            pts = np.vstack([_platform(rng, 0, 0), _platform(rng, 3, 0, z=0.8)])
+            out = node.process(_cloud(pts - pose[:3, 3], 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+            ids.append(sorted(s.id for s in out.surfaces.surfaces))
+            safe.append([s.safe for s in out.surfaces.surfaces])
+    assert ids == [ids[0]] * 4 and len(ids[0]) == 2
+    assert safe[0] == [False, False] and safe[-1] == [True, True]
+
+
+def test_incremental_equals_full_recompute(rng):
+    """Two boards 4 m apart; later scans see only the first, where a box appears."""
+    pose = _sensor_pose(0, 0, 1.5)
+    both = np.vstack([_platform(rng, 0, 0), _platform(rng, 4, 0)])
+    seq = [both]
+    for k in range(4):
+        one = _platform(rng, 0, 0, n=3000)
+        if k >= 1:
+            one = np.vstack([one, box_points(rng, (0.2, 0.1, 0.6), (0.2, 0.2, 0.2), 2000)])
+        seq.append(one)
+    outs = {}
+    for inc in (True, False):
+        with Node(incremental=inc) as node:
+            outs[inc] = [
+                node.process(_cloud(p - pose[:3, 3], 1.0 + 0.1 * i, pose=pose))
+                for i, p in enumerate(seq)
+            ]
+    assert sum(o.incremental for o in outs[True]) >= 3  # the crop really ran
+    assert not any(o.incremental for o in outs[False])
+    for a, b in zip(outs[True], outs[False], strict=True):
+        assert _summary(a) == _summary(b)
+    assert len(outs[True][-1].obstacles.clusters) == 1
+
+
+def test_removed_object_leaves_the_map(rng):
+    """A box on a board, then the board alone seen from the side: the rays through where the
+    box stood clear it within a few scans."""
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    board = lambda: _platform(rng, 0, 0, n=8000)  # noqa: E731
+    box = lambda: box_points(rng, (0.0, 0.0, 0.65), (0.3, 0.3, 0.3), 4000)  # noqa: E731
+    wall = lambda: np.c_[  # noqa: E731 - what the rays hit once the box is gone
+        np.full(6000, 2.0), rng.uniform(-1, 1, 6000), rng.uniform(0.5, 1.5, 6000)
+    ]
+    with Node() as node:
+        for i in range(3):
+            pts = np.vstack([board(), box(), wall()])
+            out = node.process(_cloud(pts - pose[:3, 3], 1.0 + 0.1 * i, pose=pose))
+        on = [c for c in out.obstacles.clusters if c.surface_id is not None]  # not the wall
+        assert len(on) == 1
+        box_id = on[0].id
+        gone = []
+        for i in range(3, 12):
+            out = node.process(
+                _cloud(np.vstack([board(), wall()]) - pose[:3, 3], 1.0 + 0.1 * i, pose=pose)
+            )
+            gone += out.gone_ids["obstacles"]
+            on = [c for c in out.obstacles.clusters if c.surface_id is not None]
+            if not on and box_id in gone:
+                break
+        assert on == []
+        assert box_id in gone
+
+
+def test_gravity_given_rotates_results(rng):
+    """A sensor rolled by 20 deg: with its gravity vector the board comes out level."""
+    roll = np.radians(20)
+    r = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
+    pts = _platform(rng, 0, 0, z=-1.0) @ r.T  # seen by a rolled sensor at the origin
+    g = r @ np.array([0.0, 0.0, -9.81])
+    with Node() as node:
+        out = node.process(
+            PointCloud.from_xyz(pts, 1.0, "lidar", gravity=g, pose=(np.zeros(3), [0, 0, 0, 1]))
+        )
+        d = node.diagnostics()
+    assert len(out.surfaces.surfaces) == 1
+    assert out.surfaces.surfaces[0].height == pytest.approx(-1.0, abs=0.02)
+    assert d.gauges["gravity_tilt_deg"] == pytest.approx(20.0, abs=0.01)
+    assert d.gauges["gravity_source"] == 1.0
+
+
+def test_quaternion_matrix_matches_pose_from_matrix():
+    a = np.radians(33)
+    r = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    m = np.eye(4)
+    m[:3, :3] = r
+    assert np.allclose(quaternion_matrix(pose_from_matrix(m).rotation), r)
+
+
+def test_detection_rate_skips_scans_but_keeps_the_map(rng):
+    params = DetectParams()
+    import dataclasses
+
+    params = dataclasses.replace(params, node=dataclasses.replace(params.node, detection_rate=2))
+    pose = _sensor_pose(0, 0, 1.5)
+    with Node(params) as node:
+        outs = [
+            node.process(_cloud(_platform(rng, 0, 0) - pose[:3, 3], 1.0 + 0.1 * i, pose=pose))
+            for i in range(11)
+        ]
+    assert [o.surfaces is not None for o in outs] == [i % 5 == 0 for i in range(11)]
+
+
+def test_time_jump_resets_map_and_ids(rng):
+    pose = _sensor_pose(0, 0, 1.5)
+    with Node() as node:
+        node.process(_cloud(_platform(rng, 0, 0) - pose[:3, 3], 10.0, pose=pose))
+        out = node.process(_cloud(_platform(rng, 3, 0) - pose[:3, 3], 0.0, pose=pose))
+        assert node.counters["time_jumps"] == 1
+    assert len(out.surfaces.surfaces) == 1
+    assert out.surfaces.surfaces[0].id == 0  # ids start over with the new timeline
+
+
+def test_handle_rejects_and_goes_on(rng):
+    pose = _sensor_pose(0, 0, 1.5)
+    good = _cloud(_platform(rng, 0, 0) - pose[:3, 3], 1.0, pose=pose).encode("scan")
+    frames = [bytes(f) for f in good]
+    bad_version = list(frames)
+    bad_version[1] = bad_version[1].replace(b"\xa7version\x01", b"\xa7version\x07")
+    nan = np.full((100, 3), np.nan)
+    cases = {
+        "malformed": [b"scan", b"\xc1garbage"],
+        "version": bad_version,
+        "unusable": [bytes(f) for f in PointCloud.from_xyz(nan, 1.0, "x").encode("scan")],
+        "truncated": [b"scan"] + frames[1:-1],
+    }
+    with Node() as node:
+        for frames_ in cases.values():
+            assert node.handle(frames_) is None
+        assert node.handle(frames) is not None
+        for seed in range(200):  # random byte flips in the header
+            r = np.random.default_rng(seed)
+            f = list(frames)
+            h = bytearray(f[1])
+            for _ in range(3):
+                h[r.integers(len(h))] = r.integers(256)
+            f[1] = bytes(h)
+            node.handle(f)
+        assert node.handle(frames) is not None
+        assert node.rejects["version"] == 1
+        assert node.rejects["unusable"] == 1
+        assert node.rejects["malformed"] >= 2
+        assert node.counters["scans_rejected"] == sum(node.rejects.values())
+    with pytest.raises(InputError):
+        Node().process(PointCloud.from_xyz(np.zeros((0, 3)), 1.0, "x"))
+
+
+def test_too_many_points_rejected(rng):
+    import dataclasses
+
+    p = DetectParams()
+    p = dataclasses.replace(p, node=dataclasses.replace(p.node, max_points=1000))
+    with Node(p) as node:
+        assert node.handle(_cloud(_platform(rng, 0, 0, n=2000), 1.0).encode("scan")) is None
+        assert node.rejects == {"too_many_points": 1}

@@ -1,0 +1,147 @@
+"""`supportnode run` as a subprocess over real sockets on 127.0.0.1: simulated scans in,
+surfaces and obstacles out; garbage, a restarting publisher, a late subscriber; SIGTERM."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import zmq
+from conftest import REPO
+
+from supportnode.client import Diagnostics, ObstacleClusters, Publisher, Subscriber, SupportSurfaces
+from supportnode.sim import Lidar, load_scene, poses_for
+from supportnode.sim.simulate import scans
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def sim_scans():
+    scene = load_scene("table_chairs")
+    return scans(scene, Lidar.preset("os128"), poses_for(scene, 40)[:8], seed=0, frame="sensor")
+
+
+def _start(scan_port: int, pub_port: int) -> subprocess.Popen:
+    cmd = [
+        sys.executable, "-m", "supportnode", "run",
+        "--set", f"node.scan_endpoint=tcp://127.0.0.1:{scan_port}",
+        "--set", f"node.pub_endpoint=tcp://127.0.0.1:{pub_port}",
+        "--set", "node.diagnostics_period=0.3",
+        "--set", "node.reject_log_period=5",
+    ]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.Popen(cmd, cwd=REPO, env=env, stderr=subprocess.PIPE, text=True)
+
+
+def _send(pub: Publisher, s, stamp: float) -> None:
+    pub.publish_cloud(s.points, stamp=stamp, frame_id="lidar", pose=s.sensor_pose)
+
+
+def test_run_end_to_end(sim_scans):
+    ctx = zmq.Context()
+    scan_port, pub_port = _free_port(), _free_port()
+    proc = _start(scan_port, pub_port)
+    try:
+        pub = Publisher(f"tcp://127.0.0.1:{scan_port}", "scan", context=ctx)
+        sub = Subscriber(
+            ["surfaces", "obstacles", "diagnostics"], f"tcp://127.0.0.1:{pub_port}",
+            context=ctx, keep_newest=5,
+        )  # fmt: skip
+        raw = pub._pub  # garbage goes out on the same socket, as a broken driver would send it
+        surfaces: list[SupportSurfaces] = []
+        obstacles: list[ObstacleClusters] = []
+        diags: list[Diagnostics] = []
+        deadline = time.monotonic() + 40
+        i = 0
+        while time.monotonic() < deadline and len(surfaces) < 5:
+            _send(pub, sim_scans[i % len(sim_scans)], 100.0 + 0.1 * i)
+            raw.send([b"scan", b"\xc1 not msgpack"])
+            raw.send([b"scan"])
+            i += 1
+            t_end = time.monotonic() + 0.4
+            while (msg := sub.recv(max(0.0, t_end - time.monotonic()))) is not None:
+                {SupportSurfaces: surfaces, ObstacleClusters: obstacles, Diagnostics: diags}[
+                    type(msg)
+                ].append(msg)
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        assert len(surfaces) >= 5
+        last = surfaces[-1]
+        heights = sorted(round(s.height, 2) for s in last.surfaces)
+        assert 0.0 in heights and 0.75 in [round(h, 2) for h in heights]
+        table = next(s for s in last.surfaces if abs(s.height - 0.75) < 0.03)
+        box = [c for c in obstacles[-1].clusters if c.surface_id == table.id]
+        assert box, "the box on the table"
+        assert any(np.linalg.norm(c.centroid[:2] - [0.2, 0.05]) < 0.1 for c in box)
+        # stable ids: the table keeps its id over the run
+        table_ids = {s.id for m in surfaces[1:] for s in m.surfaces if abs(s.height - 0.75) < 0.03}
+        assert len(table_ids) == 1
+
+        # the publisher restarts (stamps start over); a late subscriber joins
+        pub.close()
+        time.sleep(0.2)
+        pub = Publisher(f"tcp://127.0.0.1:{scan_port}", "scan", context=ctx)
+        late = Subscriber("surfaces", f"tcp://127.0.0.1:{pub_port}", context=ctx)
+        got = None
+        deadline = time.monotonic() + 20
+        j = 0
+        while got is None and time.monotonic() < deadline:
+            _send(pub, sim_scans[j % len(sim_scans)], 0.1 * j)
+            j += 1
+            got = late.recv(0.5)
+        assert isinstance(got, SupportSurfaces)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            msg = sub.recv(0.5)
+            if isinstance(msg, Diagnostics):
+                diags.append(msg)
+                if msg.counters.get("time_jumps", 0) >= 1:
+                    break
+        d = diags[-1]
+        # garbage that arrives while a scan is processed may be dropped as older than the
+        # newest message (keep-newest), so not all of it reaches the decoder
+        assert d.counters["rejected_malformed"] >= 2
+        assert d.counters["scans_processed"] >= 5
+        assert d.counters["time_jumps"] >= 1
+        assert {"map", "surfaces", "total"} <= set(d.latencies)
+        assert d.gauges["map_voxels"] > 0
+
+        # SIGTERM: gone within 2 s, exit code 0
+        t = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=5) == 0
+        assert time.monotonic() - t < 2.0
+        err = proc.stderr.read() if proc.stderr else ""
+        # one line per reject period, not one per bad message
+        assert 1 <= err.count("rejected a scan") <= 3
+        for s in (pub, sub, late):
+            s.close()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        ctx.destroy(linger=0)
+
+
+def test_sigint_before_any_scan_exits_cleanly():
+    proc = _start(_free_port(), _free_port())
+    try:
+        time.sleep(1.5)  # imports done, spinning
+        t = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=5) == 0
+        assert time.monotonic() - t < 2.0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
