@@ -481,9 +481,9 @@ def _reject_tilted_clutter(
     k = min(params.clutter_normal_k, len(support))
     if k < 3:
         return 0
-    # Thread start-up outweighs the work below ~50k queries.
-    workers = -1 if len(query) > 50_000 else 1
-    normal, _ = normals_at(cKDTree(support), support, pts[query], k, workers=workers)
+    # An unbalanced tree builds in half the time and queries as fast on scan-like data.
+    tree = cKDTree(support, balanced_tree=False, compact_nodes=False)
+    normal, _ = normals_at(tree, support, pts[query], k)
     tilted = np.abs(normal[:, 2]) < np.cos(np.radians(params.normal_filter_max_tilt_deg))
     labels[query[tilted]] = -1
     return int(tilted.sum())
