@@ -95,6 +95,7 @@ def test_l_shaped_surface():
     surf = make_surface(0, 0.7, 0.0, 1.0, 0.0, 1.0)
     keep = ~((surf.cells[:, 0] >= 5) & (surf.cells[:, 1] >= 5))
     surf.cells = surf.cells[keep]
+    surf.area = 0.75
     fs = free_space(surf, [], None, FreeSpaceParams(cell_size=C, margin=0.05))
     assert fs.free_area == pytest.approx(0.75, abs=1e-9)
     # The largest disc of an L of arm width 0.5 has radius 0.25 * ... at the inner corner

@@ -94,3 +94,16 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "x.ply").exists()
+
+
+def test_sim_writes_a_recording_that_play_reads(tmp_path):
+    from supportnode.io.sources import open_source
+
+    out = tmp_path / "seq.mcap"
+    args = ["sim", "table_chairs", "--sensor", "lidar", "--preset", "vlp16", "--frames", "3"]
+    assert cli.main([*args, "--out", str(out)]) == 0
+    with open_source(out) as src:
+        msgs = [m.decode() for m in src.messages()]
+    assert [m.seq for m in msgs] == [0, 1, 2]
+    assert [round(m.stamp, 3) for m in msgs] == [0.0, 0.1, 0.2]
+    assert all(m.pose is not None and m.count > 1000 for m in msgs)

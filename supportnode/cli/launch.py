@@ -24,6 +24,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="seconds a process gets to exit after SIGTERM before SIGKILL (default 5)",
     )
     parser.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="stop everything after S seconds and exit 0 (default: run until Ctrl-C)",
+    )
+    parser.add_argument(
         "--check", action="store_true", help="only check the file and print the command lines"
     )
 
@@ -41,4 +47,11 @@ def run(args: argparse.Namespace) -> int:
         for spec in launch.processes:
             print(f"{spec.name}: {shlex.join(spec.argv(args.overrides))}")
         return 0
-    return Launcher(launch, args.overrides, stop_timeout=args.stop_timeout).run()
+    launcher = Launcher(launch, args.overrides, stop_timeout=args.stop_timeout)
+    if args.duration is not None:
+        import threading
+
+        timer = threading.Timer(args.duration, launcher.stop)  # stop() is thread-safe
+        timer.daemon = True
+        timer.start()
+    return launcher.run()

@@ -2,6 +2,7 @@
 
 supportnode sim shelf --points 200000 --out shelf.ply
 supportnode sim table_chairs --sensor lidar --preset os128 --frames 5 --out scans/
+supportnode sim kitchen --sensor lidar --preset os128 --frames 50 --out kitchen.mcap
 supportnode sim my_scene.yaml --sensor camera --noise range:0.01 --noise tilt:2,1 --out c.npz
 """
 
@@ -56,7 +57,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out",
         required=True,
         metavar="PATH",
-        help="file.ply / file.npz (one cloud, or file_000... for several) or a directory",
+        help="file.ply / file.npz (one cloud, or file_000... for several), a directory of "
+        "frame_NNN.npz, or file.mcap (a recording for supportnode play)",
     )
 
 
@@ -104,7 +106,33 @@ def run(args: argparse.Namespace) -> int:
         poses = poses_for(scene, args.frames, level=args.sensor == "lidar")
         clouds = simulate.scans(scene, sensor, poses, args.seed, noise, args.frame)
         meta.update(preset=preset, rate_hz=sensor.rate, frame=args.frame)
+    if str(args.out).endswith(".mcap"):
+        return _write_recording(args.out, clouds, meta)
     written = write_sim_clouds(args.out, clouds, meta)
     for i, path in enumerate(written):
         print(f"{path} ({len(clouds[i])} points)" if i < len(clouds) else path)
+    return 0
+
+
+def _write_recording(out: str, clouds: list, meta: dict) -> int:
+    """A recording `supportnode play` replays: the frames as PointCloud messages on topic
+    `scan`, in the sensor frame with the sensor pose (as a driver sends them), 1/rate apart;
+    written through the same conversion as `supportnode record --from FOLDER`."""
+    import tempfile
+    from pathlib import Path
+
+    from supportnode.io.recording import RecordingWriter
+    from supportnode.io.sources import open_source
+    from supportnode.sim.files import write_sim_clouds
+
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        write_sim_clouds(tmp, clouds, meta)
+        with (
+            open_source(tmp, topic="scan") as src,
+            RecordingWriter(out, metadata={k: str(v) for k, v in meta.items()}) as writer,
+        ):
+            for m in src.messages():
+                writer.write(m.frames, receive_time=m.time)
+    print(f"{out} ({len(clouds)} scans on topic scan)")
     return 0

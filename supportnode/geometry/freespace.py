@@ -135,10 +135,13 @@ def free_space(
     else:
         centre = np.full(2, np.nan)
         radius = 0.0
+    # The raster counts border cells whole; the surface's measured area does not. Share that
+    # area out in the raster's proportions so that free + occupied == area.
+    n_surf = max(int(surf.sum()), 1)
     return FreeSpace(
         surface_id=int(surface.id),
-        free_area=float(free.sum()) * c * c,
-        occupied_area=float(occupied.sum()) * c * c,
+        free_area=float(surface.area) * float(free.sum()) / n_surf,
+        occupied_area=float(surface.area) * float(occupied.sum()) / n_surf,
         disc_center=centre,
         disc_radius=radius,
         grid_origin=origin,
