@@ -53,20 +53,29 @@ def sample_scene(
         if include_bottoms or not (f.bottom and p.pose[2, 2] > 0.5)
     ]
     # Visible share of each face from a pilot sample (its own seeded stream), so that hidden
-    # area does not take points away from visible area.
+    # area does not take points away from visible area. Only primitives whose box meets the
+    # face's box can hide part of it.
     pilot = np.random.default_rng([seed, 1])
-    visible = np.array(
-        [
-            _visible(scene, prim, _face_points(prim, face, pilot, 4000)).mean()
-            for prim, face in faces
-        ]
-    )
+    boxes = np.array([p.world_aabb() for p in scene.primitives])  # (P, 2, 3)
+    visible, blockers = [], []
+    for prim, face in faces:  # one vectorised test per face (tens to hundreds of faces)
+        probe = _face_points(prim, face, pilot, 4000)
+        # The samples stop short of the face's edges by about extent / sqrt(4000): widen.
+        lo, hi = probe.min(axis=0), probe.max(axis=0)
+        pad = 0.05 * (hi - lo) + 2e-3
+        lo, hi = lo - pad, hi + pad
+        meets = np.all((boxes[:, 0] <= hi) & (boxes[:, 1] >= lo), axis=1)
+        meets[prim.index] = False
+        others = [scene.primitives[i] for i in np.flatnonzero(meets)]
+        blockers.append(others)
+        visible.append(_visible(others, probe).mean())
+    visible = np.array(visible)
     areas = np.array([f.area for _, f in faces]) * visible
     counts = rng.multinomial(n_points, areas / areas.sum()) if areas.sum() > 0 else 0 * areas
     table = scene.label_table()
     out = empty_cloud(n_points)
     start = 0
-    for (prim, face), count, share in zip(faces, counts, visible, strict=True):
+    for (prim, face), count, share, others in zip(faces, counts, visible, blockers, strict=True):
         i = prim.index
         is_surface = face.top and prim.role == "surface"
         sl = slice(start, start + count)
@@ -78,7 +87,7 @@ def sample_scene(
         while filled < count:  # draw, drop hidden points, draw again for what is missing
             want = min(_CHUNK, count - filled)
             pts = _face_points(prim, face, rng, int(want / max(share, 1e-3) * 1.1) + 16)
-            pts = pts[_visible(scene, prim, pts)][:want]
+            pts = pts[_visible(others, pts)][:want]
             out.points[start + filled : start + filled + len(pts)] = pts
             filled += len(pts)
         start += count
@@ -90,12 +99,10 @@ def _face_points(prim, face, rng: np.random.Generator, n: int) -> np.ndarray:
     return rotate(face.sample(rng, n), prim.pose[:3, :3]) + prim.pose[:3, 3]
 
 
-def _visible(scene: Scene, prim, pts: np.ndarray, eps: float = 1e-3) -> np.ndarray:
-    """(N,) bool: world points of `prim` not inside (nor within eps of) any other primitive."""
+def _visible(others: list, pts: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+    """(N,) bool: world points not inside (nor within eps of) any of the primitives `others`."""
     ok = np.ones(len(pts), dtype=bool)
-    for other in scene.primitives:  # tens of primitives, each test vectorised over points
-        if other.index == prim.index:
-            continue
+    for other in others:  # the few primitives that can reach the face
         box = other.world_aabb()
         near = np.flatnonzero(ok & np.all((pts >= box[0] - eps) & (pts <= box[1] + eps), axis=1))
         if len(near) == 0:
