@@ -7,20 +7,12 @@ import math
 import time
 from pathlib import Path
 
+from supportnode.cli._common import add_config_arguments
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("cloud", help="point cloud file (.ply .pcd .xyz .txt .csv .npy .npz .obj)")
-    parser.add_argument(
-        "--config", metavar="YAML", help="configuration file (see config/default.yaml)"
-    )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override one parameter, e.g. --set surfaces.method=seed (repeatable)",
-    )
+    add_config_arguments(parser, "surfaces.method=seed")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: out/<cloud name>)")
     parser.add_argument(
         "--align",

@@ -14,6 +14,8 @@ import queue
 import threading
 from typing import Any
 
+from supportnode.cli._common import add_config_arguments
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -70,15 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--hwm", type=int, default=100, metavar="N", help="send queue per subscriber"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress, only the summary")
-    parser.add_argument("--config", metavar="YAML", help="configuration file (for the endpoint)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="configuration override, e.g. --set node.scan_endpoint=tcp://127.0.0.1:6000",
-    )
+    add_config_arguments(parser, "node.scan_endpoint=tcp://127.0.0.1:6000")
 
 
 def _positive(text: str) -> float:

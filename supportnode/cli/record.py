@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 
+from supportnode.cli._common import add_config_arguments
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -65,15 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--frame-id", default="map", help="--from a folder of clouds: their frame (default map)"
     )
     parser.add_argument("--quiet", action="store_true", help="print only the summary and errors")
-    parser.add_argument("--config", metavar="YAML", help="configuration file (for the endpoints)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="configuration override, e.g. --set node.scan_endpoint=tcp://127.0.0.1:6000",
-    )
+    add_config_arguments(parser, "node.scan_endpoint=tcp://127.0.0.1:6000")
 
 
 def run(args: argparse.Namespace) -> int:

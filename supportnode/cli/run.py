@@ -6,19 +6,11 @@ import argparse
 import logging
 import sys
 
+from supportnode.cli._common import add_config_arguments
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--config", metavar="YAML", help="configuration file (see config/default.yaml)"
-    )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override one parameter, e.g. --set node.detection_rate=2 (repeatable)",
-    )
+    add_config_arguments(parser, "node.detection_rate=2")
     parser.add_argument(
         "--duration", type=float, metavar="S", help="stop after this many seconds (tests)"
     )
