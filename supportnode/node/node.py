@@ -30,13 +30,13 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from types import TracebackType
 from typing import Any, Protocol
 
 import numpy as np
 import zmq
 
 from supportnode import bus
+from supportnode._closing import Closing
 from supportnode.errors import AlignmentError, InputError, ProtocolError, SupportNodeError
 from supportnode.geometry.gravity import estimate_gravity, rotation_to_z
 from supportnode.msgs import (
@@ -165,7 +165,7 @@ class _Gravity:
         return float(np.degrees(np.arccos(np.clip(self.up[2], -1.0, 1.0))))
 
 
-class Node:
+class Node(Closing):
     """The support-surface node (see the module docstring).
 
     params: the whole configuration (`DetectParams`; its ``node`` section for the node).
@@ -593,17 +593,6 @@ class Node:
             if s is not None:
                 s.close()
         self._sub = self._pub = None
-
-    def __enter__(self) -> Node:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def _is_safe(s: Any, hits: int) -> bool:
