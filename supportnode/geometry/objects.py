@@ -197,9 +197,16 @@ def _support_below(cp: np.ndarray, surfaces: list[Surface], tol: float) -> np.nd
     no more than ``tol`` below the surface's height.
     """
     sup = np.full(len(cp), -1, dtype=np.int64)
-    for s in sorted(surfaces, key=lambda s: s.height):  # higher surfaces overwrite lower ones
+    ordered = sorted(surfaces, key=lambda s: s.height)
+    # The ground (lowest surface with nothing below it) is dilated: a wall standing on its
+    # ragged edge would otherwise alternate between "over the floor" and "over nothing" and
+    # fall into strips.
+    ground = (
+        ordered[0] if ordered and len(cp) and cp[:, 2].min() >= ordered[0].height - tol else None
+    )
+    for s in ordered:  # higher surfaces overwrite lower ones
         # Undilated: a chair back rising just beside a table must not be cut at table height.
-        lk = _SupportLookup(s, dilate=False)
+        lk = _SupportLookup(s, dilate=s is ground)
         above = cp[:, 2] >= lk.height - tol
         idx = np.flatnonzero(above)
         sup[idx[lk.over(cp[idx, :2])]] = lk.id
