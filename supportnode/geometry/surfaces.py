@@ -230,7 +230,8 @@ def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _P
     )
     cand = dense[ok]
     cplanes = _Planes(planes.mean[ok], planes.normal[ok], planes.roughness[ok])
-    comp = _connect(grid.keys[cand], cplanes.mean, cplanes.normal, params)
+    # Seeds for the clutter growth; gaps are bridged once, in the final connection.
+    comp = _connect(grid.keys[cand], cplanes.mean, cplanes.normal, params, bridge=False)
     surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
     surface_of_voxel[cand] = comp
     all_planes = _Planes(
@@ -250,14 +251,18 @@ def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _P
 
 
 def _connect(
-    keys: np.ndarray, mean: np.ndarray, normal: np.ndarray, params: SurfaceParams
+    keys: np.ndarray,
+    mean: np.ndarray,
+    normal: np.ndarray,
+    params: SurfaceParams,
+    bridge: bool = True,
 ) -> np.ndarray:
     """Component of each (M, 3)-keyed voxel: neighbours join when each one's plane, extended
     to the other's point, meets it within max_step (a step, a wall top beside a table or a
     shelf board above another does not join)."""
     index = KeyIndex.build(keys)
     offsets = layered_offsets(params.connectivity)
-    if params.bridge_cells > 0:
+    if bridge and params.bridge_cells > 0:
         # Sparse scan lines far from a lidar leave empty cells between the rings of a floor.
         r = params.bridge_cells + 1
         far = np.array(
