@@ -14,22 +14,40 @@ Sensor-data semantics: a `Subscriber` keeps only the newest ``keep_newest`` mess
 consumer falls behind. ZMQ_CONFLATE cannot do this for multipart messages (it keeps one *frame*),
 so the receive queue is kept small (RCVHWM) and every `Subscriber.recv` first drains all that
 has arrived, keeping the newest and counting the rest in ``dropped``.
+
+Message size: ``Subscriber(max_message_bytes=...)`` counts and discards larger messages in
+``oversized`` instead of setting ZMQ_MAXMSGSIZE (libzmq treats a larger frame as a protocol error
+and drops the connection without reconnecting). Every receiving socket of the project passes a
+limit (the node: ``node.max_message_bytes``; `supportnode.client`: its wire limits).
+
+Security (optional): ``curve=CurveKeys(...)`` encrypts and authenticates a socket with CURVE.
+The binding socket is the server: it uses its own secret key and accepts only clients whose
+public keys (``*.key``) are in ``authorized_dir``, checked by a ZAP handler
+(`zmq.auth.thread.ThreadAuthenticator`, one per context, each server socket with its own ZAP
+domain). The connecting socket is the client: its own key pair plus the server's public key.
+Key pairs are made by ``supportnode keys DIR --name NAME`` (``NAME.key`` public,
+``NAME.key_secret`` both). A peer without CURVE, or with a key not authorised, never completes
+the handshake, so it neither receives nor delivers anything.
 """
 
 from __future__ import annotations
 
 import collections
 import errno
+import itertools
+import os
+import threading
 import time
 from collections.abc import Sequence
-from typing import TypeAlias
+from dataclasses import dataclass
+from typing import Any, TypeAlias
 
 import zmq
 
 from supportnode._closing import Closing
 from supportnode.errors import SupportNodeError
 
-__all__ = ["BusError", "Frames", "Publisher", "Subscriber", "check_endpoint"]
+__all__ = ["BusError", "CurveKeys", "Frames", "Publisher", "Subscriber", "check_endpoint"]
 
 #: One multipart message: ``[topic, *payload]``. Received payload frames are zero-copy views.
 Frames: TypeAlias = "list[bytes | memoryview]"
@@ -43,7 +61,101 @@ _REFILL_WAIT_MS = 5
 
 
 class BusError(SupportNodeError):
-    """A socket cannot bind or connect to an endpoint (bad address, address in use)."""
+    """A socket cannot bind or connect to an endpoint (bad address, address in use), or its
+    CURVE keys cannot be used (missing or unreadable key file)."""
+
+
+@dataclass(frozen=True)
+class CurveKeys:
+    """CURVE keys of one socket; which fields are needed depends on whether it binds.
+
+    ``key_file``: this socket's key pair, a ``.key_secret`` file (both sides).
+    ``authorized_dir``: server (binding) side: folder of the authorised clients' public keys
+    (``*.key``); clients whose key is not there are refused.
+    ``server_key``: client (connecting) side: the server's public key file (``.key``).
+    """
+
+    key_file: str | os.PathLike[str]
+    authorized_dir: str | os.PathLike[str] = ""
+    server_key: str | os.PathLike[str] = ""
+
+
+def _load_key(path: str | os.PathLike[str], need_secret: bool) -> tuple[bytes, bytes | None]:
+    """(public, secret) z85 keys of a certificate file, or a one-line BusError naming it."""
+    import zmq.auth
+
+    name = os.fspath(path)
+    if not name:
+        raise BusError("CURVE: no key file given")
+    if not os.path.isfile(name):
+        raise BusError(f"{name}: CURVE key file not found")
+    try:
+        with open(name, "rb"):
+            pass
+        public, secret = zmq.auth.load_certificate(name)
+    except OSError as err:
+        raise BusError(f"{name}: cannot read CURVE key file ({err.strerror or err})") from err
+    except ValueError as err:
+        raise BusError(f"{name}: not a CURVE certificate (no public-key)") from err
+    if need_secret and not secret:
+        raise BusError(
+            f"{name}: holds no secret key (use the .key_secret file made by `supportnode keys`)"
+        )
+    return public, secret
+
+
+def _load_authorized(folder: str | os.PathLike[str]) -> None:
+    """Check every ``*.key`` in ``folder`` loads; one-line BusError naming the culprit."""
+    name = os.fspath(folder)
+    if not name:
+        raise BusError("CURVE server: no authorized_dir given (folder of clients' *.key)")
+    if not os.path.isdir(name):
+        raise BusError(f"{name}: CURVE authorised-keys folder not found")
+    for entry in sorted(os.listdir(name)):
+        if entry.endswith(".key"):
+            _load_key(os.path.join(name, entry), need_secret=False)
+
+
+# One ZAP handler (ThreadAuthenticator) per context, shared by that context's CURVE servers;
+# each server socket gets its own ZAP domain so it accepts only its own folder's keys.
+_auth_lock = threading.Lock()
+_auths: dict[int, tuple[zmq.Context, Any, int]] = {}
+_domains = itertools.count()
+
+
+def _auth_acquire(context: zmq.Context, folder: str) -> str:
+    """Start (or share) the context's authenticator; returns the new socket's ZAP domain."""
+    from zmq.auth.thread import ThreadAuthenticator
+
+    domain = f"supportnode.{os.getpid()}.{next(_domains)}"
+    with _auth_lock:
+        ctx, auth, users = _auths.get(id(context), (context, None, 0))
+        if auth is None:
+            auth = ThreadAuthenticator(context)
+            auth.start()
+        try:
+            auth.configure_curve(domain=domain, location=folder)
+        except (OSError, ValueError) as err:
+            if users == 0:
+                auth.stop()
+            raise BusError(f"{folder}: cannot load CURVE public keys ({err})") from err
+        _auths[id(context)] = (ctx, auth, users + 1)
+    return domain
+
+
+def _auth_release(context: zmq.Context, domain: str) -> None:
+    """Forget ``domain``; stop the context's authenticator when no server uses it."""
+    with _auth_lock:
+        entry = _auths.get(id(context))
+        if entry is None:
+            return
+        ctx, auth, users = entry
+        auth.certs.pop(domain, None)
+        if users <= 1:
+            del _auths[id(context)]
+            auth.stop()
+        else:
+            _auths[id(context)] = (ctx, auth, users - 1)
 
 
 def check_endpoint(endpoint: str) -> str:
@@ -87,11 +199,40 @@ class _Socket(Closing):
         # linger 0: closing (or Ctrl-C) never waits for a peer that may never read.
         self.socket.setsockopt(zmq.LINGER, 0)
         self.endpoint = ""
+        self._zap_domain = ""  # set while this socket is a CURVE server
+
+    def _setup_curve(self, curve: CurveKeys | None, bind: bool) -> None:
+        """Configure CURVE before bind/connect: server if binding, else client."""
+        if curve is None:
+            return
+        if not zmq.has("curve"):
+            raise BusError("CURVE requested but this libzmq was built without CURVE support")
+        public, secret = _load_key(curve.key_file, need_secret=True)
+        assert secret is not None  # _load_key raised otherwise
+        try:
+            if bind:
+                _load_authorized(curve.authorized_dir)
+                self.socket.setsockopt(zmq.CURVE_SERVER, 1)
+                self.socket.setsockopt(zmq.CURVE_SECRETKEY, secret)
+                self._zap_domain = _auth_acquire(self._context, os.fspath(curve.authorized_dir))
+                self.socket.setsockopt_string(zmq.ZAP_DOMAIN, self._zap_domain)
+            else:
+                if not os.fspath(curve.server_key):
+                    raise BusError("CURVE client: no server_key given (the server's .key file)")
+                server_public, _ = _load_key(curve.server_key, need_secret=False)
+                self.socket.setsockopt(zmq.CURVE_PUBLICKEY, public)
+                self.socket.setsockopt(zmq.CURVE_SECRETKEY, secret)
+                self.socket.setsockopt(zmq.CURVE_SERVERKEY, server_public)
+        except zmq.ZMQError as err:
+            raise BusError(f"{os.fspath(curve.key_file)}: invalid CURVE key ({err})") from err
 
     def close(self) -> None:
         """Close the socket now, discarding anything unsent (idempotent)."""
         if not self.socket.closed:
             self.socket.close(linger=0)
+        if self._zap_domain:
+            domain, self._zap_domain = self._zap_domain, ""
+            _auth_release(self._context, domain)
 
     @property
     def closed(self) -> bool:
@@ -107,6 +248,7 @@ class Publisher(_Socket):
 
     ``hwm`` messages queue per subscriber before newer ones are dropped for that subscriber
     (a publisher never blocks on a slow consumer). ``endpoint`` holds the resolved address.
+    ``curve``: optional CURVE keys (server when binding, client when connecting).
     """
 
     def __init__(
@@ -116,10 +258,12 @@ class Publisher(_Socket):
         context: zmq.Context | None = None,
         *,
         hwm: int = 100,
+        curve: CurveKeys | None = None,
     ) -> None:
         super().__init__(zmq.PUB, context)
         try:
             self.socket.setsockopt(zmq.SNDHWM, hwm)
+            self._setup_curve(curve, bind)
             self.endpoint = _attach(self.socket, endpoint, bind)
         except BaseException:
             self._fail_init()
@@ -150,6 +294,7 @@ class Subscriber(_Socket):
     ``rcvhwm``: messages ZeroMQ queues before holding back the sender (default: topics x
     keep_newest + 4). It bounds the memory of unread scans; messages held back wait in the
     publisher's queue (its ``hwm``), which is why sensor publishers keep that small too.
+    ``curve``: optional CURVE keys (server when binding, client when connecting).
     """
 
     def __init__(
@@ -162,6 +307,7 @@ class Subscriber(_Socket):
         *,
         max_message_bytes: int | None = None,
         rcvhwm: int | None = None,
+        curve: CurveKeys | None = None,
     ) -> None:
         if keep_newest < 1:
             raise ValueError(f"keep_newest must be at least 1, got {keep_newest}")
@@ -185,6 +331,7 @@ class Subscriber(_Socket):
             self.socket.setsockopt(zmq.RCVHWM, self.rcvhwm)
             for topic in sorted(self.topics):
                 self.socket.setsockopt(zmq.SUBSCRIBE, topic)
+            self._setup_curve(curve, bind)
             self.endpoint = _attach(self.socket, endpoint, bind)
         except BaseException:
             self._fail_init()

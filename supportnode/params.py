@@ -265,3 +265,12 @@ class NodeParams:
         "frame of published results for scans with a pose: the map frame, rotated to gravity "
         "when a correction applies (scans without a pose: their own frame_id)",
     )
+    curve_enabled: bool = param(
+        False,
+        "encrypt and authenticate the node's sockets with ZeroMQ CURVE (keys in curve_keys_dir)",
+    )
+    curve_keys_dir: str = param(
+        "",
+        "CURVE key folder: this node's server.key_secret, authorised clients' public keys *.key "
+        "and, when the node connects for scans, the scan driver's public key scan_server.key",
+    )

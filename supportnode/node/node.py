@@ -446,8 +446,13 @@ class Node(Closing):
         """Create the sockets (done by `spin`; in-process use needs none)."""
         if self._sub is not None:
             return
+        curve = self._curve_keys()
         self._pub = bus.Publisher(
-            self.cfg.pub_endpoint, bind=self.cfg.pub_bind, context=self._context, hwm=10
+            self.cfg.pub_endpoint,
+            bind=self.cfg.pub_bind,
+            context=self._context,
+            hwm=10,
+            curve=curve,
         )
         try:
             self._sub = bus.Subscriber(
@@ -457,11 +462,28 @@ class Node(Closing):
                 keep_newest=self.cfg.queue,
                 context=self._context,
                 max_message_bytes=self.cfg.max_message_bytes,
+                curve=curve,
             )
         except BaseException:
             self._pub.close()
             self._pub = None
             raise
+
+    def _curve_keys(self) -> bus.CurveKeys | None:
+        """CURVE keys from ``curve_keys_dir`` when ``curve_enabled``: the node's pair
+        ``server.key_secret`` (server when a socket binds, client identity when it connects),
+        authorised clients ``*.key``, and ``scan_server.key`` (the scan driver's public key, used
+        when the scan socket connects; a publisher that connects uses it as its server key too)."""
+        if not self.cfg.curve_enabled:
+            return None
+        folder = self.cfg.curve_keys_dir
+        if not folder:
+            raise bus.BusError("node.curve_enabled is true but node.curve_keys_dir is empty")
+        return bus.CurveKeys(
+            key_file=os.path.join(folder, "server.key_secret"),
+            authorized_dir=folder,
+            server_key=os.path.join(folder, "scan_server.key"),
+        )
 
     @property
     def pub_endpoint(self) -> str:
