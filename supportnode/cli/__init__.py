@@ -26,6 +26,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "publish a recording, ROS bag or cloud folder with its timing",
     ),
     "info": ("supportnode.cli.info", "topics, counts, rates and sizes of a recording or bag"),
+    "echo": ("supportnode.cli.echo", "print a topic's messages, decoded (text or JSON lines)"),
+    "hz": ("supportnode.cli.hz", "rate, period jitter and bandwidth of a topic, once a second"),
+    "keys": ("supportnode.cli.keys", "make a CURVE key pair for encrypted, authenticated sockets"),
 }
 
 
