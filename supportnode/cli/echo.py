@@ -16,6 +16,8 @@ from typing import Any
 # numpy only: this module is imported just when `echo` runs (see supportnode.cli.build_parser).
 import numpy as np
 
+from supportnode.cli._common import int_at_least, positive_seconds
+
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 # Messages kept when printing falls behind (a slow terminal); older ones are dropped.
 _KEEP_NEWEST = 1000
@@ -31,10 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"publisher endpoint to connect to (default {DEFAULT_ENDPOINT})",
     )
     parser.add_argument("--json", action="store_true", help="one JSON object per message per line")
-    parser.add_argument("--count", type=_positive_int, metavar="N", help="stop after N messages")
+    parser.add_argument("--count", type=int_at_least(1), metavar="N", help="stop after N messages")
     parser.add_argument(
         "--timeout",
-        type=_positive_float,
+        type=positive_seconds,
         metavar="S",
         help="stop after S seconds without a message (default: wait forever)",
     )
@@ -256,17 +258,3 @@ def _plain(value: Any) -> Any:
 
 def _nbytes(frame: Any) -> int:
     return frame.nbytes if isinstance(frame, memoryview) else len(frame)
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    value = float(text)
-    if not value > 0 or not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
-    return value

@@ -15,6 +15,8 @@ import itertools
 import math
 from collections.abc import Sequence
 
+from supportnode.cli._common import int_at_least, positive_seconds
+
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 # Messages ZeroMQ may queue for us: deep enough that a busy moment never drops anything.
 _RCVHWM = 10_000
@@ -29,14 +31,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--window",
-        type=_window,
+        type=int_at_least(2),
         default=100,
         metavar="N",
         help="statistics over the last N messages (default 100)",
     )
     parser.add_argument(
         "--duration",
-        type=_duration,
+        type=positive_seconds,
         metavar="S",
         help="stop after S seconds (default: until Ctrl-C)",
     )
@@ -123,17 +125,3 @@ def format_stats(arrivals: Sequence[float], sizes: Sequence[int]) -> str | None:
         f"bandwidth {window_bytes / span / 1e6:.3f} MB/s  "
         f"({sum(sizes) / len(sizes) / 1e6:.3f} MB/msg)"
     )
-
-
-def _window(text: str) -> int:
-    value = int(text)
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"needs at least 2 messages, got {value}")
-    return value
-
-
-def _duration(text: str) -> float:
-    value = float(text)
-    if not value > 0 or not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
-    return value

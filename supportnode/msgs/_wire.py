@@ -13,7 +13,7 @@ import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TypeVar
 
 import msgpack
 import numpy as np
@@ -409,3 +409,17 @@ def encode_frames(
 def expect_type(chk: Check, header: Header, type_name: str) -> None:
     if header.type != type_name:
         chk.fail(f"expected a {type_name} message, got {header.type}")
+
+
+M = TypeVar("M", bound="Decodable")
+
+
+class Decodable:
+    """``decode(frames)`` for message types that define ``_from_parsed(header, buffers, limits)``."""
+
+    @classmethod
+    def decode(cls: type[M], frames: Any, limits: Limits | None = None) -> M:
+        """Validated message from ``[topic, header, *buffers]``; any problem is a ProtocolError."""
+        limits = limits or Limits()
+        header, buffers = parse_frames(frames, limits)
+        return cls._from_parsed(header, buffers, limits)  # type: ignore[attr-defined]

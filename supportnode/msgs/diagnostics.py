@@ -7,11 +7,11 @@ from typing import Any, ClassVar
 
 from supportnode.msgs._wire import (
     Check,
+    Decodable,
     Header,
     Limits,
     encode_frames,
     expect_type,
-    parse_frames,
     short,
 )
 
@@ -30,7 +30,7 @@ class LatencyStats:
 
 
 @dataclass(eq=False)
-class Diagnostics:
+class Diagnostics(Decodable):
     """Counters (int64), latencies per stage (seconds), gauges (finite float64) and a status.
 
     Every float is finite on the wire; send a counter or leave a gauge out rather than NaN.
@@ -72,13 +72,6 @@ class Diagnostics:
             Check(name, "cannot encode: ").fail(f"diagnostics values are not numbers: {err}")
         _check_keys(Check(name, "cannot encode: "), extra)
         return encode_frames(topic, self.TYPE, self.stamp, self.frame_id, self.seq, [], extra)
-
-    @classmethod
-    def decode(cls, frames: Any, limits: Limits | None = None) -> Diagnostics:
-        """Validated message from ``[topic, header]``; any problem is a ProtocolError."""
-        limits = limits or Limits()
-        header, buffers = parse_frames(frames, limits)
-        return cls._from_parsed(header, buffers, limits)
 
     @classmethod
     def _from_parsed(cls, header: Header, buffers: dict[str, Any], limits: Limits) -> Diagnostics:

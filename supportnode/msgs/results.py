@@ -21,11 +21,11 @@ from supportnode.geometry.surfaces import Surface
 from supportnode.msgs._wire import (
     FLOAT_DTYPES,
     Check,
+    Decodable,
     Header,
     Limits,
     encode_frames,
     expect_type,
-    parse_frames,
 )
 
 __all__ = ["ObstacleCluster", "ObstacleClusters", "SupportSurface", "SupportSurfaces"]
@@ -101,7 +101,7 @@ class ObstacleCluster:
 
 
 @dataclass(eq=False)
-class SupportSurfaces:
+class SupportSurfaces(Decodable):
     """Every support surface of one detection."""
 
     TYPE: ClassVar[str] = "SupportSurfaces"
@@ -188,13 +188,6 @@ class SupportSurfaces:
         )
 
     @classmethod
-    def decode(cls, frames: Any, limits: Limits | None = None) -> SupportSurfaces:
-        """Validated message from ``[topic, header, *buffers]``; any problem is a ProtocolError."""
-        limits = limits or Limits()
-        header, buffers = parse_frames(frames, limits)
-        return cls._from_parsed(header, buffers, limits)
-
-    @classmethod
     def _from_parsed(
         cls, header: Header, buffers: dict[str, np.ndarray], limits: Limits
     ) -> SupportSurfaces:
@@ -224,7 +217,7 @@ class SupportSurfaces:
 
 
 @dataclass(eq=False)
-class ObstacleClusters:
+class ObstacleClusters(Decodable):
     """Every obstacle cluster of one detection."""
 
     TYPE: ClassVar[str] = "ObstacleClusters"
@@ -319,13 +312,6 @@ class ObstacleClusters:
         return encode_frames(
             topic, self.TYPE, self.stamp, self.frame_id, self.seq, list(cols.items())
         )
-
-    @classmethod
-    def decode(cls, frames: Any, limits: Limits | None = None) -> ObstacleClusters:
-        """Validated message from ``[topic, header, *buffers]``; any problem is a ProtocolError."""
-        limits = limits or Limits()
-        header, buffers = parse_frames(frames, limits)
-        return cls._from_parsed(header, buffers, limits)
 
     @classmethod
     def _from_parsed(
