@@ -131,8 +131,7 @@ def _auth_acquire(context: zmq.Context, folder: str) -> str:
     with _auth_lock:
         ctx, auth, users = _auths.get(id(context), (context, None, 0))
         if auth is None:
-            auth = ThreadAuthenticator(context)
-            auth.start()
+            auth = _start_authenticator(ThreadAuthenticator, context)
         try:
             auth.configure_curve(domain=domain, location=folder)
         except (OSError, ValueError) as err:
@@ -141,6 +140,21 @@ def _auth_acquire(context: zmq.Context, folder: str) -> str:
             raise BusError(f"{folder}: cannot load CURVE public keys ({err})") from err
         _auths[id(context)] = (ctx, auth, users + 1)
     return domain
+
+
+def _start_authenticator(factory: Any, context: zmq.Context) -> Any:
+    """Start a ZAP handler. libzmq frees the handler's inproc address asynchronously after a
+    previous handler stopped, so binding may briefly find it in use: retry for up to 2 s."""
+    deadline = time.monotonic() + 2.0
+    while True:
+        auth = factory(context)
+        try:
+            auth.start()
+            return auth
+        except zmq.ZMQError as err:
+            if err.errno != zmq.EADDRINUSE or time.monotonic() > deadline:
+                raise BusError(f"cannot start the CURVE authenticator: {err}") from err
+            time.sleep(0.02)
 
 
 def _auth_release(context: zmq.Context, domain: str) -> None:
@@ -216,6 +230,9 @@ class _Socket(Closing):
                 self.socket.setsockopt(zmq.CURVE_SECRETKEY, secret)
                 self._zap_domain = _auth_acquire(self._context, os.fspath(curve.authorized_dir))
                 self.socket.setsockopt_string(zmq.ZAP_DOMAIN, self._zap_domain)
+                # Without this, libzmq accepts every CURVE client while no ZAP handler is
+                # bound (e.g. while the shared authenticator restarts): fail closed instead.
+                self.socket.setsockopt(zmq.ZAP_ENFORCE_DOMAIN, 1)
             else:
                 if not os.fspath(curve.server_key):
                     raise BusError("CURVE client: no server_key given (the server's .key file)")
