@@ -292,6 +292,22 @@ def test_signal_stops_children_in_reverse_order(tmp_path, sig):
     assert "[a] a up" in out and "[c] c stopping" in out
 
 
+def test_duration_stops_everything_and_exits_0(tmp_path):
+    write(tmp_path / "child.py", CHILD)
+    write(tmp_path / "l.yaml", "- name: a\n  command: python child.py a .\n")
+    proc = start_cli(tmp_path, "--duration", "1.5")
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    assert (tmp_path / "stopped.txt").read_text() == "a\n"
+
+
+def test_bad_duration_is_one_line_exit_2(tmp_path):
+    write(tmp_path / "l.yaml", "- name: a\n  command: python -c pass\n")
+    proc = start_cli(tmp_path, "--duration", "soon")
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 2 and "--duration" in err and "Traceback" not in err
+
+
 def test_sigkill_after_stop_timeout(tmp_path):
     write(tmp_path / "child.py", CHILD)
     write(

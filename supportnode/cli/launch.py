@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from supportnode.cli._common import positive_seconds
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="launch file (YAML list of processes, see launch/*.yaml)")
@@ -25,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--duration",
-        type=float,
+        type=positive_seconds,
         metavar="S",
         help="stop everything after S seconds and exit 0 (default: run until Ctrl-C)",
     )
