@@ -182,3 +182,17 @@ def test_align_refuses_a_cloud_without_horizontal_surfaces(tmp_path, rng, capsys
     )
     err = capsys.readouterr().err
     assert "horizontal surface" in err and len(err.strip().splitlines()) == 1
+
+
+def test_sensor_origin_drops_undersides_and_rejects_bad_values(table_cloud, tmp_path, capsys):
+    path, _ = table_cloud
+    out = tmp_path / "o"
+    args = ["detect", str(path), "--out", str(out), "--no-objects", "--quiet"]
+    assert main([*args, "--sensor-origin", "0,0,0.5"]) == 0  # below the table: only the floor
+    heights = [s["height"] for s in json.loads((out / "result.json").read_text())["surfaces"]]
+    assert heights == [pytest.approx(0.0)]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*args, "--sensor-origin", "0,0"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--sensor-origin" in err and "X,Y,Z" in err
