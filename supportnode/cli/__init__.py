@@ -29,6 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "echo": ("supportnode.cli.echo", "print a topic's messages, decoded (text or JSON lines)"),
     "hz": ("supportnode.cli.hz", "rate, period jitter and bandwidth of a topic, once a second"),
     "keys": ("supportnode.cli.keys", "make a CURVE key pair for encrypted, authenticated sockets"),
+    "view": ("supportnode.cli.view", "show the node's topics or a recording live in Foxglove"),
 }
 
 

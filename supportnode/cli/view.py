@@ -1,0 +1,335 @@
+"""`supportnode view`: show the node's topics live in Foxglove, or a recording.
+
+    supportnode view                                   # live: subscribe, serve ws://127.0.0.1:8765
+    supportnode view RECORDING.mcap                    # replay it to the viewer, recorded timing
+    supportnode view RECORDING.mcap --out fox.mcap     # convert: an MCAP Foxglove opens directly
+
+Live, it subscribes to the node's results (``--endpoint``: surfaces, obstacles, diagnostics) and
+to the scans (``--scan-endpoint``, unless ``--no-scan``), converts each message to Foxglove's
+schemas (`supportnode.view.foxglove_bridge`) and forwards it to a Foxglove WebSocket server
+running in this process; open the printed URL in a browser or the Foxglove desktop app. Ends on
+Ctrl-C / SIGTERM or after ``--duration`` seconds (exit 0). Needs the ``view`` extra.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from typing import Any
+
+from supportnode.cli._common import positive_seconds
+
+DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
+DEFAULT_SCAN_ENDPOINT = "tcp://127.0.0.1:5555"
+RESULT_TOPICS = ("surfaces", "obstacles", "diagnostics")
+# Results are small and every one matters for the deletions; of scans only the newest counts.
+_KEEP_RESULTS = 16
+_KEEP_SCANS = 1
+_QUEUE = 64  # decoded messages waiting for conversion; beyond that the oldest waits in ZeroMQ
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "source",
+        nargs="?",
+        help="a recording (.mcap from record or sim --out, ROS bag, cloud folder) to replay "
+        "or, with --out, convert; none: view the running node live",
+    )
+    parser.add_argument(
+        "--out",
+        metavar="FILE.mcap",
+        help="write SOURCE converted to Foxglove schemas to this MCAP file instead of serving",
+    )
+    parser.add_argument(
+        "--endpoint",
+        default=DEFAULT_ENDPOINT,
+        help=f"the node's result endpoint (default {DEFAULT_ENDPOINT})",
+    )
+    parser.add_argument(
+        "--topics",
+        nargs="+",
+        default=list(RESULT_TOPICS),
+        metavar="TOPIC",
+        help=f"result topics to show (default: {' '.join(RESULT_TOPICS)})",
+    )
+    parser.add_argument(
+        "--scan-endpoint",
+        default=DEFAULT_SCAN_ENDPOINT,
+        help=f"where scans are published (default {DEFAULT_SCAN_ENDPOINT})",
+    )
+    parser.add_argument("--scan-topic", default="scan", help="scan topic (default scan)")
+    parser.add_argument("--no-scan", action="store_true", help="do not show the scans")
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="address the viewer server listens on (127.0.0.1)"
+    )
+    parser.add_argument(
+        "--port",
+        type=_port,
+        default=8765,
+        help="viewer server port (default 8765; 0: any free one)",
+    )
+    parser.add_argument(
+        "--map-frame", default="map", help="frame the scans' poses lead to (default map)"
+    )
+    parser.add_argument(
+        "--rate",
+        type=_positive,
+        default=1.0,
+        metavar="R",
+        help="replay speed factor (default 1)",
+    )
+    parser.add_argument(
+        "--duration", type=positive_seconds, metavar="S", help="stop after S seconds"
+    )
+    parser.add_argument("--quiet", action="store_true", help="print only errors")
+
+
+def _positive(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text}") from None
+    if not value > 0 or not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _port(text: str) -> int:
+    """argparse type: a TCP port 0..65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number, got {text}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be 0..65535, got {value}")
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    import signal
+
+    from supportnode.view import ViewError, require_foxglove
+
+    require_foxglove()  # one line with the install command, before anything starts
+    if args.out is not None and args.source is None:
+        raise ViewError("--out converts a recording: give the recording too")
+    if args.out is not None:
+        return _convert(args)
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.set()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _serve(args, stop)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    if not args.quiet:
+        print(f"view: {text}", flush=True)
+
+
+# ----------------------------------------------------------------------------------- convert
+
+
+def _convert(args: argparse.Namespace) -> int:
+    """Write every message of ``args.source`` converted, at its recorded time."""
+    import os
+
+    import foxglove
+
+    from supportnode.errors import ProtocolError
+    from supportnode.io.sources import open_source
+    from supportnode.view import ViewError
+    from supportnode.view.foxglove_bridge import Bridge
+    from supportnode.view.sink import Channels, write_mcap
+
+    if os.path.exists(args.out) and os.path.samefile(args.out, args.source):
+        raise ViewError(f"{args.out}: --out would overwrite the recording")
+    bridge, skipped = Bridge(map_frame=args.map_frame), 0
+    with open_source(args.source, topic=args.scan_topic) as src:
+        ctx = foxglove.Context()
+        channels = Channels(ctx)
+        with write_mcap(ctx, args.out) as writer:
+            writer.write_metadata("supportnode", {"converted_from": os.fspath(args.source)})
+            for m in src.messages():
+                try:
+                    msg = m.decode()
+                except ProtocolError as err:
+                    skipped += 1
+                    print(f"supportnode view: skipped: {err}", file=sys.stderr)
+                    continue
+                channels.log(bridge.convert(msg, m.topic), _ns(m.time))
+        for line in src.warnings:
+            print(f"supportnode view: warning: {line}", file=sys.stderr)
+    _say(
+        args,
+        f"wrote {channels.logged} messages on {', '.join(channels.topics) or 'no topics'} "
+        f"to {args.out}" + (f" ({skipped} skipped)" if skipped else ""),
+    )
+    return 0
+
+
+def _ns(seconds: float) -> int:
+    return max(0, round(seconds * 1e9))
+
+
+# ------------------------------------------------------------------------------------- serve
+
+
+def _serve(args: argparse.Namespace, stop: threading.Event) -> int:
+    """Start the server, then forward live messages or replay ``args.source`` until done."""
+    import foxglove
+
+    from supportnode.view.foxglove_bridge import Bridge
+    from supportnode.view.sink import Channels, serve
+
+    ctx = foxglove.Context()
+    server = serve(ctx, args.host, args.port)
+    channels = Channels(ctx)
+    try:
+        ws = f"ws://{args.host}:{server.port}"
+        _say(args, f"open {server.app_url()}  (or connect Foxglove to {ws})")
+        bridge = Bridge(map_frame=args.map_frame)
+        if args.source is None:
+            _live(args, stop, bridge, channels)
+        else:
+            _replay(args, stop, bridge, channels)
+    finally:
+        channels.close()
+        server.stop()
+    _say(args, f"forwarded {channels.logged} messages")
+    return 0
+
+
+def _live(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels: Any) -> None:
+    import queue
+    import time
+
+    inbox: queue.Queue = queue.Queue(maxsize=_QUEUE)
+    wanted = [(args.endpoint, args.topics, _KEEP_RESULTS)]
+    if not args.no_scan:
+        wanted.append((args.scan_endpoint, [args.scan_topic], _KEEP_SCANS))
+    receivers: list[Receiver] = []
+    deadline = None if args.duration is None else time.monotonic() + args.duration
+    try:
+        for endpoint, topics, keep in wanted:
+            receivers.append(Receiver(endpoint, topics, keep, inbox, stop))
+            receivers[-1].start()
+        while not stop.is_set():
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            try:
+                topic, msg, received = inbox.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            channels.log(bridge.convert(msg, topic), _ns(received))
+    finally:
+        stop.set()
+        for r in receivers:
+            r.join(2.0)
+    rejected = sum(r.rejected for r in receivers)
+    if rejected:
+        last = next(r.last_error for r in receivers if r.last_error)
+        _say(args, f"{rejected} malformed messages skipped (last: {last})")
+
+
+class Receiver(threading.Thread):
+    """Subscribes to ``topics`` at ``endpoint`` and puts (topic, decoded message, receive time)
+    into ``inbox`` until ``stop`` is set. The socket is opened in the caller's thread (so that a
+    bad endpoint raises there) and used only by this thread afterwards."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        topics: list[str],
+        keep_newest: int,
+        inbox: Any,
+        stop: threading.Event,
+    ) -> None:
+        from supportnode import bus
+        from supportnode.msgs import Limits
+
+        super().__init__(daemon=True, name=f"view {endpoint}")
+        self.limits = Limits()
+        self.sub = bus.Subscriber(
+            endpoint,
+            topics,
+            keep_newest=keep_newest,
+            max_message_bytes=self.limits.max_message_bytes,
+        )
+        self.inbox, self.stop = inbox, stop
+        self.rejected = 0
+        self.last_error: str | None = None
+
+    def run(self) -> None:
+        import queue
+        import time
+
+        from supportnode.errors import ProtocolError
+        from supportnode.msgs import decode_any
+
+        try:
+            while not self.stop.is_set():
+                frames = self.sub.recv(0.1)  # short: notices `stop` soon
+                if frames is None:
+                    continue
+                received = time.time()
+                try:
+                    msg = decode_any(frames, self.limits)
+                except ProtocolError as err:
+                    self.rejected += 1
+                    self.last_error = str(err)
+                    continue
+                topic = bytes(memoryview(frames[0])).decode("utf-8", "replace")
+                while not self.stop.is_set():
+                    try:
+                        self.inbox.put((topic, msg, received), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+        finally:
+            self.sub.close()
+
+
+def _replay(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels: Any) -> None:
+    """Forward ``args.source`` with its recorded timing divided by ``args.rate``: each message
+    is due at its offset from the first, measured from one start instant (no drift)."""
+    import time
+
+    from supportnode.errors import ProtocolError
+    from supportnode.io.sources import open_source
+
+    with open_source(args.source, topic=args.scan_topic) as src:
+        start = time.monotonic()
+        end = None if args.duration is None else start + args.duration
+        first: float | None = None
+        for m in src.messages():
+            first = m.time if first is None else first
+            due = start + (m.time - first) / args.rate
+            if end is not None and due >= end:
+                break
+            if stop.wait(max(0.0, due - time.monotonic())):
+                break
+            try:
+                msg = m.decode()
+            except ProtocolError as err:
+                print(f"supportnode view: skipped: {err}", file=sys.stderr)
+                continue
+            # Receive time as it happens now: the viewer's clock runs with the replay.
+            channels.log(bridge.convert(msg, m.topic), time.time_ns())
+        for line in src.warnings:
+            print(f"supportnode view: warning: {line}", file=sys.stderr)
+    if not stop.is_set() and (end is None or time.monotonic() < end):
+        # Keep serving, so that the last scene stays on screen until the user is done.
+        _say(args, "end of the recording; Ctrl-C to stop")
+        stop.wait(None if end is None else max(0.0, end - time.monotonic()))
