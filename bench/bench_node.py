@@ -179,7 +179,7 @@ def ids(scene_name: str, frames: int) -> dict:
     """Accuracy and id switches on a simulated sequence. A ground-truth surface is found when
     a published surface lies within 3 cm of its height and 1 m of its centre (the largest such
     one counts); a ground-truth object when a published cluster's centroid is within 10 cm of
-    its centroid (x, y). An id switch: the id found for one ground-truth item changes between
+    its centroid in x, y and in z (z too: on a shelf, objects on different boards share x, y). An id switch: the id found for one ground-truth item changes between
     two scans where it is found."""
     scene = scene_by_name(scene_name)
     sc = scans(scene, Lidar.preset("os128"), poses_for(scene, frames), seed=0, frame="sensor")
@@ -193,7 +193,7 @@ def ids(scene_name: str, frames: int) -> dict:
             gt_o.setdefault(int(oid), []).append(w[s.object == oid])
     sh = {k: float(np.median(np.concatenate(v)[:, 2])) for k, v in gt_s.items()}
     sc_ = {k: np.concatenate(v)[:, :2].mean(axis=0) for k, v in gt_s.items()}
-    oc = {k: np.concatenate(v)[:, :2].mean(axis=0) for k, v in gt_o.items()}
+    oc = {k: np.concatenate(v).mean(axis=0) for k, v in gt_o.items()}
     s_ids: dict[int, list[int]] = {k: [] for k in gt_s}
     o_ids: dict[int, list[int]] = {k: [] for k in gt_o}
     s_found, o_found = [], []
@@ -217,7 +217,8 @@ def ids(scene_name: str, frames: int) -> dict:
                 near = [
                     c
                     for c in out.obstacles.clusters
-                    if np.linalg.norm(c.centroid[:2] - oc[k]) < 0.10
+                    if np.linalg.norm(c.centroid[:2] - oc[k][:2]) < 0.10
+                    and abs(c.centroid[2] - oc[k][2]) < 0.10
                 ]
                 if near:
                     o_ids[k].append(max(near, key=lambda c: c.point_count).id)

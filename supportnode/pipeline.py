@@ -14,6 +14,7 @@ import numpy as np
 from supportnode.geometry.freespace import FreeSpace, free_space_all
 from supportnode.geometry.objects import ObjectResult, detect_objects
 from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
+from supportnode.geometry.transform import transform_points
 from supportnode.params import DetectParams
 
 
@@ -85,7 +86,7 @@ def detect(
         t = time.perf_counter()
         gravity = estimate_gravity(pts, params.gravity, sensor_origin=sensor_origin)
         rotation = gravity.rotation
-        pts = pts @ rotation.T
+        pts = transform_points(pts, rotation)
         timings["gravity"] = time.perf_counter() - t
     t = time.perf_counter()
     origin = None

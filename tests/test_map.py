@@ -218,3 +218,27 @@ def test_bad_input_and_touched_region(rng):
     assert len(touched.keys) == len(m)
     assert np.all(touched.lo >= -1e-12) and np.all(touched.hi <= 1.0)
     assert len(m.points(touched.keys)) == len(m.points())
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 20.0])
+def test_points_in_box_holds_every_point_in_the_box(rng, tilt_deg):
+    """The crop handed to regional detection: a superset of the points whose rotated x, y lie
+    in the box (nothing in the box is lost), far fewer than the map, None above max_share."""
+    m = _no_clear()
+    m.integrate(rng.uniform(-5, 5, (40_000, 3)), EYE, 0.0)
+    a = np.radians(tilt_deg)
+    rot = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    lo, hi = np.array([-1.0, 0.5]), np.array([0.3, 2.0])
+
+    def inside(p):
+        q = p @ rot.T
+        return p[np.all((q[:, :2] >= lo) & (q[:, :2] <= hi), axis=1)]
+
+    want = inside(m.points())
+    crop = m.points_in_box(lo, hi, rot)
+    got = inside(crop)
+    assert len(want) > 100
+    assert len(crop) < 0.3 * len(m.points())
+    key = lambda p: set(map(tuple, np.round(p, 9)))  # noqa: E731
+    assert key(got) == key(want)
+    assert m.points_in_box(np.array([-9.0, -9.0]), np.array([9.0, 9.0]), rot, 0.8) is None

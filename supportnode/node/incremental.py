@@ -20,6 +20,7 @@ Everything here is in the node's detection frame (map frame rotated to gravity).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +31,7 @@ from supportnode.geometry.surfaces import Surface
 from supportnode.params import DetectParams
 from supportnode.pipeline import detect
 
-__all__ = ["Items", "full", "regional"]
+__all__ = ["Items", "full", "regional", "regional_from"]
 
 # A crop holding at least this share of the map's points is not worth the bookkeeping.
 _MAX_CROP_SHARE = 0.8
@@ -105,6 +106,29 @@ def regional(
 ) -> Items | None:
     """Detection equal to ``full(points)`` when only the x, y box [lo, hi] (2,) changed since
     ``previous`` was computed on the map; None when that cannot be guaranteed cheaply."""
+
+    def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
+        xy = points[:, :2]
+        in_crop = np.all((xy >= blo) & (xy <= bhi), axis=1)
+        return None if in_crop.sum() >= max_share * len(points) else points[in_crop]
+
+    return regional_from(fetch, previous, lo, hi, params, origin, margin)
+
+
+def regional_from(
+    fetch: Callable[[np.ndarray, np.ndarray, float], np.ndarray | None],
+    previous: Items,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    params: DetectParams,
+    origin: np.ndarray | None = None,
+    margin: float = 0.5,
+) -> Items | None:
+    """`regional` on a map that hands out crops: ``fetch(box_lo, box_hi, max_share)`` returns
+    the (P, 3) detection-frame points whose x, y lie in the box, or None when they would be at
+    least ``max_share`` of the map (then a full recompute is cheaper). The node fetches from
+    its voxel map, so the cost of a scan does not grow with the parts of the map it did not
+    touch."""
     lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
         return None
@@ -118,11 +142,10 @@ def regional(
                 inside[i] = True
                 lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
                 grew = True
-    xy = points[:, :2]
-    in_crop = np.all((xy >= lo - 2 * margin) & (xy <= hi + 2 * margin), axis=1)
-    if in_crop.sum() >= _MAX_CROP_SHARE * len(points):
+    crop = fetch(lo - 2 * margin, hi + 2 * margin, _MAX_CROP_SHARE)
+    if crop is None:
         return None
-    new = _from_detection(points[in_crop], params, origin)
+    new = _from_detection(crop, params, origin)
     # New items meeting the region must lie within region + margin; items entirely in the
     # context band are pieces of unchanged items, which `previous` holds whole.
     keep_s = []

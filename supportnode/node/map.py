@@ -26,6 +26,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.transform import transform_points
 from supportnode.geometry.voxels import OUTER_INDEX, VoxelGrid, voxelize
 from supportnode.params import MapParams
 
@@ -330,7 +331,7 @@ class VoxelMap:
             self._stats["points_invalid"] += int((~finite).sum())
             pts = pts[finite]
         if not in_map_frame:
-            pts = np.dot(pts, np.ascontiguousarray(pose[:3, :3].T)) + pose[:3, 3]
+            pts = transform_points(pts, pose[:3, :3], pose[:3, 3])
         origin = pose[:3, 3].copy()
         self._scans += 1
         self._stats["scans"] += 1
@@ -353,7 +354,33 @@ class VoxelMap:
         skipped), None for the whole map. "recent": up to ``keep_points`` raw points per voxel;
         "centroid": one point per voxel.
         """
-        slots = self._slots(keys)
+        return self._points_of(self._slots(keys))
+
+    def points_in_box(
+        self,
+        lo: np.ndarray,
+        hi: np.ndarray,
+        rotation: np.ndarray | None = None,
+        max_share: float = 1.0,
+    ) -> np.ndarray | None:
+        """:meth:`points` of the voxels that may hold points whose x, y after ``rotation``
+        (3, 3), map frame -> another frame (e.g. gravity-aligned), lie in the box [lo, hi] (2,)
+        of that frame: a superset, map frame; the caller applies the exact test. None when
+        those voxels are ``max_share`` or more of the map. Costs one pass over the voxel keys,
+        not over the map's points."""
+        live = np.flatnonzero(self._alive)
+        centre = (self._keys[live] + 0.5) * self.size
+        if rotation is not None:
+            centre = transform_points(centre, rotation)
+        pad = self.size * np.sqrt(3.0) / 2.0  # a point lies within this of its voxel's centre
+        xy = centre[:, :2]
+        sel = np.all((xy >= np.asarray(lo) - pad) & (xy <= np.asarray(hi) + pad), axis=1)
+        n = int(sel.sum())
+        if n >= max_share * len(live):
+            return None
+        return self._points_of(live[sel])
+
+    def _points_of(self, slots: np.ndarray) -> np.ndarray:
         corner = self._keys[slots] * self.size
         if self.representation == "centroid":
             return corner + self._sums[slots] / self._count[slots, None]

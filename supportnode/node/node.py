@@ -39,6 +39,7 @@ from supportnode import bus
 from supportnode._closing import Closing
 from supportnode.errors import AlignmentError, InputError, ProtocolError, SupportNodeError
 from supportnode.geometry.gravity import estimate_gravity, rotation_to_z
+from supportnode.geometry.transform import transform_points
 from supportnode.msgs import (
     Diagnostics,
     Limits,
@@ -325,9 +326,6 @@ class Node(Closing):
         timings: dict[str, float],
     ) -> NodeOutput:
         rotation = self.gravity.rotation
-        t = time.perf_counter()
-        points = self.map.points() @ rotation.T
-        timings["points"] = time.perf_counter() - t
         # Not the sensor origin: the map holds points seen from many places, and the rule
         # "planes above the sensor are undersides" is applied below to every surface alike.
         items = None
@@ -338,11 +336,26 @@ class Node(Closing):
         same_frame = self._items_rotation is not None and np.allclose(
             self._items_rotation, rotation, atol=1e-9
         )
+        fetch_time = [0.0]
+
+        def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
+            t = time.perf_counter()
+            pts = self.map.points_in_box(blo, bhi, rotation, max_share)
+            if pts is not None:
+                pts = transform_points(pts, rotation)
+                pts = pts[np.all((pts[:, :2] >= blo) & (pts[:, :2] <= bhi), axis=1)]
+            fetch_time[0] += time.perf_counter() - t
+            return pts
+
         if self.incremental and self._items is not None and same_frame:
-            items = incremental.regional(points, self._items, lo, hi, self.params)
+            items = incremental.regional_from(fetch, self._items, lo, hi, self.params)
         is_incremental = items is not None
         if items is None:
+            t = time.perf_counter()
+            points = transform_points(self.map.points(), rotation)
+            fetch_time[0] += time.perf_counter() - t
             items = incremental.full(points, self.params)
+        timings["points"] = fetch_time[0]
         self._items, self._items_rotation = items, rotation
         timings.update({k: v for k, v in items.timings.items()})
         self.counters["detections"] += 1
