@@ -246,6 +246,12 @@ class NodeParams:
     diagnostics_period: float = param(
         1.0, "time between Diagnostics messages", "s", min=0.01, max=3600.0
     )
+    map_topic: str = param(
+        "map", "topic of the map as a PointCloud (one point per voxel, results' frame)"
+    )
+    map_period: float = param(
+        1.0, "time between map messages (0: never publish the map)", "s", min=0.0, max=3600.0
+    )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
         64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024

@@ -15,7 +15,14 @@ import pytest
 import zmq
 from conftest import REPO
 
-from supportnode.client import Diagnostics, ObstacleClusters, Publisher, Subscriber, SupportSurfaces
+from supportnode.client import (
+    Diagnostics,
+    ObstacleClusters,
+    PointCloud,
+    Publisher,
+    Subscriber,
+    SupportSurfaces,
+)
 from supportnode.sim import Lidar, load_scene, poses_for
 from supportnode.sim.simulate import scans
 
@@ -38,6 +45,7 @@ def _start(scan_port: int, pub_port: int) -> subprocess.Popen:
         "--set", f"node.scan_endpoint=tcp://127.0.0.1:{scan_port}",
         "--set", f"node.pub_endpoint=tcp://127.0.0.1:{pub_port}",
         "--set", "node.diagnostics_period=0.3",
+        "--set", "node.map_period=0.3",
         "--set", "node.reject_log_period=5",
     ]  # fmt: skip
     env = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -56,13 +64,14 @@ def test_run_end_to_end(sim_scans):
     try:
         pub = Publisher(f"tcp://127.0.0.1:{scan_port}", "scan", context=ctx)
         sub = Subscriber(
-            ["surfaces", "obstacles", "diagnostics"], f"tcp://127.0.0.1:{pub_port}",
+            ["surfaces", "obstacles", "diagnostics", "map"], f"tcp://127.0.0.1:{pub_port}",
             context=ctx, keep_newest=5,
         )  # fmt: skip
         raw = pub._pub  # garbage goes out on the same socket, as a broken driver would send it
         surfaces: list[SupportSurfaces] = []
         obstacles: list[ObstacleClusters] = []
         diags: list[Diagnostics] = []
+        maps: list[PointCloud] = []
         deadline = time.monotonic() + 40
         i = 0
         while time.monotonic() < deadline and len(surfaces) < 5:
@@ -72,9 +81,12 @@ def test_run_end_to_end(sim_scans):
             i += 1
             t_end = time.monotonic() + 0.4
             while (msg := sub.recv(max(0.0, t_end - time.monotonic()))) is not None:
-                {SupportSurfaces: surfaces, ObstacleClusters: obstacles, Diagnostics: diags}[
-                    type(msg)
-                ].append(msg)
+                {
+                    SupportSurfaces: surfaces,
+                    ObstacleClusters: obstacles,
+                    Diagnostics: diags,
+                    PointCloud: maps,
+                }[type(msg)].append(msg)
         assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
         assert len(surfaces) >= 5
         last = surfaces[-1]
@@ -84,6 +96,10 @@ def test_run_end_to_end(sim_scans):
         box = [c for c in obstacles[-1].clusters if c.surface_id == table.id]
         assert box, "the box on the table"
         assert any(np.linalg.norm(c.centroid[:2] - [0.2, 0.05]) < 0.1 for c in box)
+        # the map, one point per voxel in the results' frame: floor and table top in it
+        assert maps and maps[-1].frame_id == last.frame_id and maps[-1].count > 1000
+        z = maps[-1].points[:, 2]
+        assert (np.abs(z) < 0.03).sum() > 500 and (np.abs(z - 0.75) < 0.03).sum() > 100
         # stable ids: the table keeps its id over the run
         table_ids = {s.id for m in surfaces[1:] for s in m.surfaces if abs(s.height - 0.75) < 0.03}
         assert len(table_ids) == 1

@@ -4,7 +4,7 @@
     supportnode view RECORDING.mcap                    # replay it to the viewer, recorded timing
     supportnode view RECORDING.mcap --out fox.mcap     # convert: an MCAP Foxglove opens directly
 
-Live, it subscribes to the node's results (``--endpoint``: surfaces, obstacles, diagnostics) and
+Live, it subscribes to the node's results (``--endpoint``: surfaces, obstacles, diagnostics, map) and
 to the scans (``--scan-endpoint``, unless ``--no-scan``), converts each message to Foxglove's
 schemas (`supportnode.view.foxglove_bridge`) and forwards it to a Foxglove WebSocket server
 running in this process; open the printed URL in a browser or the Foxglove desktop app. Ends on
@@ -22,7 +22,7 @@ from supportnode.cli._common import positive_seconds
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_SCAN_ENDPOINT = "tcp://127.0.0.1:5555"
-RESULT_TOPICS = ("surfaces", "obstacles", "diagnostics")
+RESULT_TOPICS = ("surfaces", "obstacles", "diagnostics", "map")
 # Results are small and every one matters for the deletions; of scans only the newest counts.
 _KEEP_RESULTS = 16
 _KEEP_SCANS = 1

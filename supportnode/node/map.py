@@ -356,6 +356,14 @@ class VoxelMap:
         """
         return self._points_of(self._slots(keys))
 
+    def centroids(self, max_points: int | None = None) -> np.ndarray:
+        """(V, 3) float64 mean of each voxel's points, map frame, metres; at most
+        ``max_points`` of them (every k-th voxel in store order) when given."""
+        slots = np.flatnonzero(self._alive)
+        if max_points is not None and len(slots) > max_points:
+            slots = slots[:: -(-len(slots) // max_points)]
+        return self._keys[slots] * self.size + self._sums[slots] / self._count[slots, None]
+
     def points_in_box(
         self,
         lo: np.ndarray,

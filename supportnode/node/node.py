@@ -72,6 +72,8 @@ _GRAVITY_EVERY = 10
 _TIME_JUMP = 1e-3
 # How long one wait for a scan lasts in spin: bounds the reaction time to a stop request.
 _POLL_S = 0.05
+# Points of the published map at most (3 MB a message): a map of millions of voxels is thinned.
+MAP_MAX_POINTS = 262_144
 
 
 class MapLike(Protocol):
@@ -207,6 +209,7 @@ class Node(Closing):
             "seq_gaps": 0,
             "gravity_failures": 0,
             "diagnostics_sent": 0,
+            "maps_sent": 0,
         }
         self.rejects: dict[str, int] = {}
         self.last_reject = ""
@@ -215,6 +218,8 @@ class Node(Closing):
         self._pub: bus.Publisher | None = None
         self._stop = threading.Event()
         self._diag_seq = 0
+        self._map_seq = 0
+        self._posed, self._frame = False, "map"
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -281,6 +286,7 @@ class Node(Closing):
             rate <= 0 or self._last_detect is None or stamp - self._last_detect >= 1.0 / rate - 1e-6
         )
         frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
+        self._posed, self._frame = cloud.pose is not None, cloud.frame_id
         if not due:
             # The region touched by skipped scans must be redone at the next detection.
             self._pending_region(touched)
@@ -529,6 +535,7 @@ class Node(Closing):
         end = None if duration is None else time.monotonic() + duration
         period = self.cfg.diagnostics_period
         next_diag = time.monotonic() + period
+        next_map = time.monotonic() + self.cfg.map_period
         self.log.info(
             "%s: scans from %s (topic %s), results on %s",
             self.cfg.name,
@@ -560,6 +567,9 @@ class Node(Closing):
                 if time.monotonic() >= next_diag:
                     self.publish_diagnostics()
                     next_diag = time.monotonic() + period
+                if self.cfg.map_period > 0 and time.monotonic() >= next_map:
+                    self.publish_map()
+                    next_map = time.monotonic() + self.cfg.map_period
         finally:
             for sig, old in restore.items():
                 signal.signal(sig, old)
@@ -620,6 +630,26 @@ class Node(Closing):
         self._pub.send(msg.encode(self.cfg.diagnostics_topic))
         self.counters["diagnostics_sent"] += 1
         self.last_reject = ""
+        return msg
+
+    def map_cloud(self) -> PointCloud | None:
+        """The map as a PointCloud: one point per voxel (its points' mean, at most
+        MAP_MAX_POINTS), in the results' frame; None before the first scan."""
+        if self._last_stamp is None or not hasattr(self.map, "centroids"):
+            return None
+        pts = transform_points(self.map.centroids(MAP_MAX_POINTS), self.gravity.rotation)
+        frame = self.cfg.frame_id if self._posed else self._frame
+        self._map_seq += 1
+        return PointCloud.from_xyz(pts.astype(np.float32), self._last_stamp, frame, self._map_seq)
+
+    def publish_map(self) -> PointCloud | None:
+        """Send `map_cloud` on ``node.map_topic`` (sockets must be open); returns it."""
+        if self._pub is None:
+            raise InputError("publish_map needs open sockets (call open() or spin())")
+        msg = self.map_cloud()
+        if msg is not None and msg.count:
+            self._pub.send(msg.encode(self.cfg.map_topic))
+            self.counters["maps_sent"] += 1
         return msg
 
     def close(self) -> None:
