@@ -252,6 +252,11 @@ class NodeParams:
     map_period: float = param(
         1.0, "time between map messages (0: never publish the map)", "s", min=0.0, max=3600.0
     )
+    pipeline: bool = param(
+        True,
+        "merge every scan into the map as it arrives and detect in a second thread on the "
+        "newest map (false: one thread; scans that arrive while detecting are dropped)",
+    )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
         64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024

@@ -206,3 +206,69 @@ def test_too_many_points_rejected(rng):
     with Node(p) as node:
         assert node.handle(_cloud(_platform(rng, 0, 0, n=2000), 1.0).encode("scan")) is None
         assert node.rejects == {"too_many_points": 1}
+
+
+@pytest.mark.parametrize("pipeline", [True, False])
+def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
+    """Scans at a rate detection cannot follow. Pipelined: every scan still enters the map and
+    detection skips to the newest (counted); one thread: scans are dropped at the socket.
+    Either way results keep coming, for the newest scans."""
+    import dataclasses
+    import threading
+    import time
+
+    from supportnode.client import Publisher, Subscriber, SupportSurfaces
+    from supportnode.node import incremental
+
+    full = incremental.full
+
+    def slow_full(*a, **kw):
+        time.sleep(0.25)
+        return full(*a, **kw)
+
+    monkeypatch.setattr(incremental, "full", slow_full)
+    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
+    p = DetectParams()
+    node_p = dataclasses.replace(
+        p.node,
+        scan_endpoint=pub.endpoint,
+        pub_endpoint="tcp://127.0.0.1:*",
+        pipeline=pipeline,
+        map_period=0.0,
+    )
+    pose = _sensor_pose(0, 0, 1.5)
+    pts = _platform(rng, 0, 0) - pose[:3, 3]
+    with Node(dataclasses.replace(p, node=node_p), incremental=False) as node:
+        node.open()
+        sub = Subscriber("surfaces", node.pub_endpoint, keep_newest=100)
+        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+        th.start()
+        time.sleep(0.5)  # slow joiner
+        n = 12
+        for i in range(n):
+            pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+            time.sleep(0.05)
+        got = []
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            msg = sub.recv(0.5)
+            if isinstance(msg, SupportSurfaces):
+                got.append(msg)
+                if msg.stamp == pytest.approx(1.0 + 0.1 * (n - 1)):
+                    break
+        d = node.diagnostics()
+        node.stop()
+        th.join(5)
+        sub.close()
+    pub.close()
+    c = d.counters
+    assert got and got[-1].stamp == pytest.approx(1.0 + 0.1 * (n - 1)), "the newest scan"
+    assert [round(s.height, 2) for s in got[-1].surfaces] == [0.5]
+    assert c["detections"] < n
+    if pipeline:
+        assert c["scans_processed"] == n and c["scans_dropped"] == 0
+        assert c["detections_skipped"] >= 1
+        assert c["detections"] + c["detections_skipped"] == n
+    else:
+        assert c["scans_dropped"] >= 1
+        assert c["scans_processed"] + c["scans_dropped"] == n

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import threading
 import time
 from collections.abc import Callable
 
@@ -27,13 +28,16 @@ class LatencyWindow:
     def __init__(self, size: int = 1000) -> None:
         self.size = int(size)
         self._samples: dict[str, collections.deque[float]] = {}
+        # The pipelined node adds from two threads while diagnostics read.
+        self._lock = threading.Lock()
 
     def add(self, stage: str, seconds: float) -> None:
         """Record one sample of ``stage``."""
-        q = self._samples.get(stage)
-        if q is None:
-            q = self._samples[stage] = collections.deque(maxlen=self.size)
-        q.append(max(0.0, float(seconds)))
+        with self._lock:
+            q = self._samples.get(stage)
+            if q is None:
+                q = self._samples[stage] = collections.deque(maxlen=self.size)
+            q.append(max(0.0, float(seconds)))
 
     def add_all(self, timings: dict[str, float]) -> None:
         """Record one sample of every stage in ``timings`` (stage -> seconds)."""
@@ -42,15 +46,17 @@ class LatencyWindow:
 
     def samples(self, stage: str) -> np.ndarray:
         """(K,) float64 seconds of ``stage`` in the window (empty when never recorded)."""
-        return np.asarray(self._samples.get(stage, ()), dtype=np.float64)
+        with self._lock:
+            return np.asarray(self._samples.get(stage, ()), dtype=np.float64)
 
     def stats(self) -> dict[str, LatencyStats]:
         """p50 and p99 of every stage with at least one sample."""
         out = {}
-        for stage, q in self._samples.items():
-            if q:
-                p50, p99 = np.percentile(np.asarray(q), [50, 99])
-                out[stage] = LatencyStats(p50=float(p50), p99=float(p99))
+        with self._lock:
+            window = {stage: np.asarray(q) for stage, q in self._samples.items() if q}
+        for stage, q in window.items():
+            p50, p99 = np.percentile(q, [50, 99])
+            out[stage] = LatencyStats(p50=float(p50), p99=float(p99))
         return out
 
 

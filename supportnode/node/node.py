@@ -104,6 +104,17 @@ class NodeOutput:
     items: Items | None = None
 
 
+@dataclass
+class _Job:
+    """The newest scan ingested into the map, waiting for detection."""
+
+    pose: np.ndarray  # (4, 4) sensor -> map
+    stamp: float
+    frame: str
+    generation: int  # of the map it went into (a reset starts a new one)
+    t_recv: float = 0.0  # perf_counter when it was received (threaded spin)
+
+
 def quaternion_matrix(q: np.ndarray) -> np.ndarray:
     """(3, 3) rotation of the unit quaternion ``q`` = (x, y, z, w)."""
     x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
@@ -210,6 +221,7 @@ class Node(Closing):
             "gravity_failures": 0,
             "diagnostics_sent": 0,
             "maps_sent": 0,
+            "detections_skipped": 0,
         }
         self.rejects: dict[str, int] = {}
         self.last_reject = ""
@@ -220,6 +232,13 @@ class Node(Closing):
         self._diag_seq = 0
         self._map_seq = 0
         self._posed, self._frame = False, "map"
+        # Guards the map, the pending region and the gravity estimate between the receiving
+        # thread and the detection thread of a pipelined spin (uncontended in process()).
+        self._lock = threading.RLock()
+        self._pub_lock = threading.Lock()
+        self._job_ready = threading.Condition()
+        self._job: _Job | None = None
+        self._generation = 0
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -239,6 +258,7 @@ class Node(Closing):
         self._out_seq = 0
         self._last_counts = (0, 0)
         self._pending: tuple[np.ndarray, np.ndarray] | None = None
+        self._generation += 1
 
     # ------------------------------------------------------------------ in-process
 
@@ -249,57 +269,65 @@ class Node(Closing):
         """
         t_start = time.perf_counter()
         timings: dict[str, float] = {}
+        job = self._ingest(cloud, timings)
+        if not self._detection_due(job.stamp):
+            timings["total"] = time.perf_counter() - t_start
+            self.latency.add_all(timings)
+            return NodeOutput(None, None, timings)
+        out = self._detect_job(job, timings)
+        assert out is not None  # one thread: no reset can happen during the detection
+        timings["total"] = time.perf_counter() - t_start
+        self.latency.add_all(timings)
+        return out
+
+    def _ingest(self, cloud: PointCloud, timings: dict[str, float]) -> _Job:
+        """Gravity and map update of one scan; the region it touched joins the pending region
+        that the next detection recomputes. Holds the map lock."""
         if cloud.count == 0:
             raise InputError("scan has no finite points")
-        stamp = float(cloud.stamp)
-        if self._last_stamp is not None and stamp < self._last_stamp - _TIME_JUMP:
-            self.counters["time_jumps"] += 1
-            self.log.warning(
-                "scan stamp %.3f is before the previous %.3f: source restarted, map reset",
-                stamp,
-                self._last_stamp,
-            )
-            self.reset()
-        if self._last_seq is not None and cloud.seq > self._last_seq + 1:
-            self.counters["seq_gaps"] += cloud.seq - self._last_seq - 1
-        self._last_seq = cloud.seq
-        self.counters["points_nonfinite"] += int(cloud.dropped_nonfinite)
-        pose = np.eye(4)
-        if cloud.pose is not None:
-            pose[:3, :3] = quaternion_matrix(cloud.pose.rotation)
-            pose[:3, 3] = cloud.pose.translation
-        points = cloud.points
+        with self._lock:
+            stamp = float(cloud.stamp)
+            if self._last_stamp is not None and stamp < self._last_stamp - _TIME_JUMP:
+                self.counters["time_jumps"] += 1
+                self.log.warning(
+                    "scan stamp %.3f is before the previous %.3f: source restarted, map reset",
+                    stamp,
+                    self._last_stamp,
+                )
+                self.reset()
+            if self._last_seq is not None and cloud.seq > self._last_seq + 1:
+                self.counters["seq_gaps"] += cloud.seq - self._last_seq - 1
+            self._last_seq = cloud.seq
+            self.counters["points_nonfinite"] += int(cloud.dropped_nonfinite)
+            pose = np.eye(4)
+            if cloud.pose is not None:
+                pose[:3, :3] = quaternion_matrix(cloud.pose.rotation)
+                pose[:3, 3] = cloud.pose.translation
 
-        t = time.perf_counter()
-        failures = self.gravity.failures
-        self.gravity.update(cloud, pose[:3, :3], points)
-        self.counters["gravity_failures"] += self.gravity.failures - failures
-        timings["gravity"] = time.perf_counter() - t
+            t = time.perf_counter()
+            failures = self.gravity.failures
+            self.gravity.update(cloud, pose[:3, :3], cloud.points)
+            self.counters["gravity_failures"] += self.gravity.failures - failures
+            timings["gravity"] = time.perf_counter() - t
 
-        t = time.perf_counter()
-        touched = self.map.integrate(points, pose, stamp)
-        self._last_stamp = stamp
-        timings["map"] = time.perf_counter() - t
+            t = time.perf_counter()
+            touched = self.map.integrate(cloud.points, pose, stamp)
+            self._last_stamp = stamp
+            self._pending_region(touched)
+            timings["map"] = time.perf_counter() - t
+            self.counters["scans_processed"] += 1
+            frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
+            self._posed, self._frame = cloud.pose is not None, cloud.frame_id
+            return _Job(pose, stamp, frame, self._generation)
 
+    def _detection_due(self, stamp: float) -> bool:
         rate = self.cfg.detection_rate
         due = (
             rate <= 0 or self._last_detect is None or stamp - self._last_detect >= 1.0 / rate - 1e-6
         )
-        frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
-        self._posed, self._frame = cloud.pose is not None, cloud.frame_id
-        if not due:
-            # The region touched by skipped scans must be redone at the next detection.
-            self._pending_region(touched)
-            timings["total"] = time.perf_counter() - t_start
-            self.counters["scans_processed"] += 1
-            self.latency.add_all(timings)
-            return NodeOutput(None, None, timings)
-        self._last_detect = stamp
-        out = self._detect(touched, pose, stamp, frame, timings)
-        timings["total"] = time.perf_counter() - t_start
-        self.counters["scans_processed"] += 1
-        self.latency.add_all(timings)
-        return out
+        if due:
+            self._last_detect = stamp
+        return due
 
     def _touched_box(self, touched: Any, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """x, y box in the detection frame of what ``touched`` (map frame) changed."""
@@ -323,22 +351,15 @@ class Node(Closing):
             lo, hi = np.minimum(lo, self._pending[0]), np.maximum(hi, self._pending[1])
         self._pending = (lo, hi)
 
-    def _detect(
-        self,
-        touched: Any,
-        pose: np.ndarray,
-        stamp: float,
-        frame: str,
-        timings: dict[str, float],
-    ) -> NodeOutput:
-        rotation = self.gravity.rotation
+    def _detect_job(self, job: _Job, timings: dict[str, float]) -> NodeOutput | None:
+        """Detection on the map as it is now, for the newest ingested scan ``job``."""
+        with self._lock:
+            rotation = self.gravity.rotation
+            region, self._pending = self._pending, None
+        lo, hi = region if region is not None else (np.full(2, np.inf), np.full(2, -np.inf))
         # Not the sensor origin: the map holds points seen from many places, and the rule
         # "planes above the sensor are undersides" is applied below to every surface alike.
         items = None
-        lo, hi = self._touched_box(touched, rotation)
-        if self._pending is not None:
-            lo, hi = np.minimum(lo, self._pending[0]), np.maximum(hi, self._pending[1])
-            self._pending = None
         same_frame = self._items_rotation is not None and np.allclose(
             self._items_rotation, rotation, atol=1e-9
         )
@@ -346,7 +367,8 @@ class Node(Closing):
 
         def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
             t = time.perf_counter()
-            pts = self.map.points_in_box(blo, bhi, rotation, max_share)
+            with self._lock:
+                pts = self.map.points_in_box(blo, bhi, rotation, max_share)
             if pts is not None:
                 pts = transform_points(pts, rotation)
                 pts = pts[np.all((pts[:, :2] >= blo) & (pts[:, :2] <= bhi), axis=1)]
@@ -358,16 +380,21 @@ class Node(Closing):
         is_incremental = items is not None
         if items is None:
             t = time.perf_counter()
-            points = transform_points(self.map.points(), rotation)
+            with self._lock:
+                raw = self.map.points()
+            points = transform_points(raw, rotation)
             fetch_time[0] += time.perf_counter() - t
             items = incremental.full(points, self.params)
         timings["points"] = fetch_time[0]
-        self._items, self._items_rotation = items, rotation
         timings.update({k: v for k, v in items.timings.items()})
-        self.counters["detections"] += 1
-        self.counters["incremental_detections"] += int(is_incremental)
-        sensor_z = float((rotation @ pose[:3, 3])[2])
-        return self._messages(items, sensor_z, stamp, frame, timings, is_incremental)
+        sensor_z = float((rotation @ job.pose[:3, 3])[2])
+        with self._lock:  # a reset (source restarted) must not interleave with the tracking
+            if job.generation != self._generation:
+                return None  # the map was reset while this ran: the result is stale
+            self._items, self._items_rotation = items, rotation
+            self.counters["detections"] += 1
+            self.counters["incremental_detections"] += int(is_incremental)
+            return self._messages(items, sensor_z, job.stamp, job.frame, timings, is_incremental)
 
     def _messages(
         self,
@@ -433,13 +460,8 @@ class Node(Closing):
         """Decode one received message and process it; a message the node cannot use is
         counted in ``rejects`` by reason, logged (rate-limited) and None is returned."""
         t = time.perf_counter()
-        try:
-            msg = decode_any(frames, self.limits)
-        except ProtocolError as err:
-            self._reject(_reason(str(err)), str(err))
-            return None
-        if not isinstance(msg, PointCloud):
-            self._reject("wrong_type", f"expected a PointCloud on the scan topic, got {msg.TYPE}")
+        msg = self._decode(frames)
+        if msg is None:
             return None
         decode = time.perf_counter() - t
         try:
@@ -454,6 +476,18 @@ class Node(Closing):
         out.timings["decode"] = decode
         self.latency.add("decode", decode)
         return out
+
+    def _decode(self, frames: Any) -> PointCloud | None:
+        """The scan in ``frames``, or None (counted and logged) when it is not a usable one."""
+        try:
+            msg = decode_any(frames, self.limits)
+        except ProtocolError as err:
+            self._reject(_reason(str(err)), str(err))
+            return None
+        if not isinstance(msg, PointCloud):
+            self._reject("wrong_type", f"expected a PointCloud on the scan topic, got {msg.TYPE}")
+            return None
+        return msg
 
     def _reject(self, reason: str, text: str) -> None:
         self.counters["scans_rejected"] += 1
@@ -543,6 +577,11 @@ class Node(Closing):
             self.cfg.scan_topic,
             self.pub_endpoint,
         )
+        worker = None
+        if self.cfg.pipeline:
+            self._job = None
+            worker = threading.Thread(target=self._detect_loop, name="detect", daemon=True)
+            worker.start()
         try:
             while not self._stop.is_set():
                 now = time.monotonic()
@@ -561,9 +600,12 @@ class Node(Closing):
                         )
                 if frames is not None:
                     t_recv = time.perf_counter()
-                    out = self.handle(frames)
-                    if out is not None and out.surfaces is not None:
-                        self._publish(out, t_recv)
+                    if worker is not None:
+                        self._ingest_for_worker(frames, t_recv)
+                    else:
+                        out = self.handle(frames)
+                        if out is not None and out.surfaces is not None:
+                            self._publish(out, t_recv)
                 if time.monotonic() >= next_diag:
                     self.publish_diagnostics()
                     next_diag = time.monotonic() + period
@@ -571,15 +613,76 @@ class Node(Closing):
                     self.publish_map()
                     next_map = time.monotonic() + self.cfg.map_period
         finally:
+            self._stop.set()
+            if worker is not None:
+                with self._job_ready:
+                    self._job_ready.notify_all()
+                worker.join(5.0)
             for sig, old in restore.items():
                 signal.signal(sig, old)
+
+    # ------------------------------------------------------------------ pipelined spin
+
+    def _ingest_for_worker(self, frames: Any, t_recv: float) -> None:
+        """Receiving thread: decode, merge into the map, hand the newest scan to detection."""
+        msg = self._decode(frames)
+        if msg is None:
+            return
+        timings: dict[str, float] = {"decode": time.perf_counter() - t_recv}
+        try:
+            job = self._ingest(msg, timings)
+        except SupportNodeError as err:
+            self._reject("unusable", f"scan seq {msg.seq}: {err}")
+            return
+        except Exception as err:
+            self.log.exception("scan seq %s: internal error", msg.seq)
+            self._reject("internal_error", f"scan seq {msg.seq}: {type(err).__name__}: {err}")
+            return
+        self.latency.add_all(timings)
+        if not self._detection_due(job.stamp):
+            return
+        job.t_recv = t_recv
+        with self._job_ready:
+            if self._job is not None:
+                # Detection is still busy with an older scan: that one's region stays pending,
+                # and the next detection covers both (the map has every scan either way).
+                self.counters["detections_skipped"] += 1
+            self._job = job
+            self._job_ready.notify()
+
+    def _detect_loop(self) -> None:
+        """Detection thread: detect on the newest ingested scan, publish, repeat."""
+        while True:
+            with self._job_ready:
+                while self._job is None and not self._stop.is_set():
+                    self._job_ready.wait(_POLL_S)
+                if self._stop.is_set():
+                    return
+                job, self._job = self._job, None
+            timings: dict[str, float] = {}
+            t = time.perf_counter()
+            try:
+                out = self._detect_job(job, timings)
+            except Exception as err:
+                self.log.exception("scan at %.3f: internal error in detection", job.stamp)
+                self._reject("internal_error", f"detection: {type(err).__name__}: {err}")
+                continue
+            if out is None:
+                continue
+            timings["detect"] = time.perf_counter() - t
+            timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
+            self.latency.add_all(timings)
+            self._publish(out, job.t_recv)
 
     def _publish(self, out: NodeOutput, t_recv: float) -> None:
         assert self._pub is not None and out.surfaces is not None and out.obstacles is not None
         t = time.perf_counter()
-        # Surfaces last: a planner that reacts to surfaces then already has their obstacles.
-        self._pub.send(out.obstacles.encode(self.cfg.obstacles_topic))
-        self._pub.send(out.surfaces.encode(self.cfg.surfaces_topic))
+        obstacles = out.obstacles.encode(self.cfg.obstacles_topic)
+        surfaces = out.surfaces.encode(self.cfg.surfaces_topic)
+        with self._pub_lock:  # ZeroMQ sockets are not thread-safe
+            # Surfaces last: a planner that reacts to surfaces then already has their obstacles.
+            self._pub.send(obstacles)
+            self._pub.send(surfaces)
         out.timings["publish"] = time.perf_counter() - t
         self.latency.add("publish", out.timings["publish"])
         self.latency.add("receive_to_publish", time.perf_counter() - t_recv)
@@ -627,7 +730,8 @@ class Node(Closing):
         if self._pub is None:
             raise InputError("publish_diagnostics needs open sockets (call open() or spin())")
         msg = self.diagnostics()
-        self._pub.send(msg.encode(self.cfg.diagnostics_topic))
+        with self._pub_lock:
+            self._pub.send(msg.encode(self.cfg.diagnostics_topic))
         self.counters["diagnostics_sent"] += 1
         self.last_reject = ""
         return msg
@@ -646,9 +750,12 @@ class Node(Closing):
         """Send `map_cloud` on ``node.map_topic`` (sockets must be open); returns it."""
         if self._pub is None:
             raise InputError("publish_map needs open sockets (call open() or spin())")
-        msg = self.map_cloud()
+        with self._lock:
+            msg = self.map_cloud()
         if msg is not None and msg.count:
-            self._pub.send(msg.encode(self.cfg.map_topic))
+            frames = msg.encode(self.cfg.map_topic)
+            with self._pub_lock:
+                self._pub.send(frames)
             self.counters["maps_sent"] += 1
         return msg
 
