@@ -5,6 +5,11 @@ merge through the pose -> detection on the region the scan touched -> stable ids
 socket. `Node.process` is that path without sockets (tests and embedding); `Node.spin` adds the
 sockets, keep-newest input, the diagnostics timer and clean shutdown on SIGINT/SIGTERM.
 
+`spin` is pipelined (``node.pipeline``): the receiving thread decodes and merges every scan into
+the map as it arrives; a detection thread runs on the newest map state and publishes. When
+detection is slower than the scans, it skips to the newest scan (counted), but the map still
+has every scan. numpy and scipy release the GIL in their loops, so the two threads overlap.
+
     with Node(load_config("config/default.yaml")) as node:
         out = node.process(cloud)            # NodeOutput: SupportSurfaces, ObstacleClusters
     with Node(params) as node:
