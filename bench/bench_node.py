@@ -165,6 +165,8 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0) -> dict:
         "received": c["scans_received"],
         "processed": c["scans_processed"],
         "dropped": c["scans_dropped"],
+        "detections": c["detections"],
+        "detections_skipped": c.get("detections_skipped", 0),
         "surfaces_received": len(lat),
         "latency": _pct(lat) if lat else None,
         "node_stages": {
