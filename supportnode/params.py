@@ -109,6 +109,20 @@ class SurfaceParams:
         min=0.0,
         max=90.0,
     )
+    object_top_max_area: float = param(
+        0.5,
+        "planar: a level face smaller than this that stands on a lower surface which is "
+        "hidden under it (the top of a box on a worktop) and holds nothing is an object's "
+        "top, not a surface; 0: off",
+        "m^2",
+        min=0.0,
+    )
+    object_top_max_height: float = param(
+        0.5,
+        "planar: such a face is an object's top only this close above the surface around it",
+        "m",
+        min=0.0,
+    )
 
 
 @dataclass(frozen=True)

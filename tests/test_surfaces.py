@@ -254,3 +254,77 @@ def test_normal_filter_removes_the_seed_methods_false_positives(room):
     assert (filtered.labels[truth == 3] >= 0).mean() < 0.2 * (plain.labels[truth == 3] >= 0).mean()
     heights = sorted(round(s.height, 2) for s in filtered.surfaces if s.point_count > 1000)
     assert heights == [0.0, 0.73]
+
+
+def _without(pts, x0, x1, y0, y1):
+    """Points outside the horizontal rectangle: what a solid box standing there hides."""
+    inside = (pts[:, 0] > x0) & (pts[:, 0] < x1) & (pts[:, 1] > y0) & (pts[:, 1] < y1)
+    return pts[~inside]
+
+
+def _legs(rng, corners, top, n=600):
+    legs = []
+    for x, y in corners:
+        t = rng.uniform(0, 2 * np.pi, n)
+        legs.append(np.c_[x + 0.02 * np.cos(t), y + 0.02 * np.sin(t), rng.uniform(0, top, n)])
+    return np.vstack(legs)
+
+
+def test_top_of_a_box_on_a_table_is_an_object_not_a_surface(rng):
+    """A microwave-sized box (0.5 x 0.4 m, 0.3 m tall) on a table: its top is flat and big
+    enough for min_area, but the table is hidden under it and it is low above the table."""
+    floor = plane_points(rng, -1.5, 2.5, -1.5, 2.0, 0.0, 60000)
+    table = _without(plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000), 0.3, 0.8, 0.2, 0.6)
+    box = box_points(rng, (0.55, 0.4, 0.9), (0.5, 0.4, 0.3), 12000)
+    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
+    pts = np.vstack([floor, table, box, legs])
+    res = detect_surfaces(pts)
+    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.75]
+    top = np.arange(len(pts))[len(floor) + len(table) : len(floor) + len(table) + len(box)]
+    assert (res.labels[top[pts[top, 2] > 1.0]] == -1).all()
+    off = detect_surfaces(pts, SurfaceParams(object_top_max_area=0.0))
+    assert sorted(round(s.height, 2) for s in off.surfaces) == [0.0, 0.75, 1.05]
+    # Higher above the table than object_top_max_height: a surface again.
+    low = detect_surfaces(pts, SurfaceParams(object_top_max_height=0.25))
+    assert sorted(round(s.height, 2) for s in low.surfaces) == [0.0, 0.75, 1.05]
+
+
+def test_small_low_table_with_floor_seen_under_it_is_a_surface(rng):
+    """A side table (0.45 x 0.45 m at 0.45 m) is as small and low as a box top, but the floor
+    shows under it between its legs."""
+    floor = plane_points(rng, -1, 1.5, -1, 1.5, 0.0, 40000)
+    top = plane_points(rng, 0, 0.45, 0, 0.45, 0.45, 6000)
+    legs = _legs(rng, [(0.03, 0.03), (0.42, 0.03), (0.03, 0.42), (0.42, 0.42)], 0.43)
+    res = detect_surfaces(np.vstack([floor, top, legs]))
+    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.45]
+
+
+def test_low_shelf_board_with_floor_partly_seen_below_is_a_surface(rng):
+    """A bench or bottom shelf board (1.0 x 0.35 m at 0.4 m) between side panels, in front of
+    a wall: a sensor in front sees the floor under its front half only."""
+    floor = _without(plane_points(rng, -1, 2, -1.5, 0.35, 0.0, 50000), 0, 1.0, 0.17, 0.35)
+    board = plane_points(rng, 0, 1.0, 0, 0.35, 0.4, 8000)
+    sides = [
+        np.c_[np.full(3000, x), rng.uniform(0, 0.35, 3000), rng.uniform(0, 0.8, 3000)]
+        for x in (-0.01, 1.01)
+    ]
+    wall = np.c_[rng.uniform(-1, 2, 8000), np.full(8000, 0.36), rng.uniform(0, 1.5, 8000)]
+    res = detect_surfaces(np.vstack([floor, board, *sides, wall]))
+    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.4]
+
+
+def test_box_top_that_holds_something_stays_a_surface(rng):
+    """The same box with a tin standing on it, beside a wall taller than the box: something
+    stands there, so it is a place to put things (a cabinet on a desk); the wall rising beside
+    a bare box does not count as a load."""
+    floor = plane_points(rng, -1.5, 2.5, -1.5, 2.0, 0.0, 60000)
+    table = _without(plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000), 0.3, 0.8, 0.2, 0.6)
+    box = box_points(rng, (0.55, 0.4, 0.9), (0.5, 0.4, 0.3), 12000)
+    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
+    wall = np.c_[rng.uniform(-0.5, 1.7, 15000), np.full(15000, 0.61), rng.uniform(0.75, 2.0, 15000)]
+    bare = detect_surfaces(np.vstack([floor, table, box, legs, wall]))
+    assert sorted(round(s.height, 2) for s in bare.surfaces) == [0.0, 0.75]
+    t = rng.uniform(0, 2 * np.pi, 1500)
+    tin = np.c_[0.5 + 0.04 * np.cos(t), 0.4 + 0.04 * np.sin(t), rng.uniform(1.06, 1.2, 1500)]
+    loaded = detect_surfaces(np.vstack([floor, table, box, legs, wall, tin]))
+    assert sorted(round(s.height, 2) for s in loaded.surfaces) == [0.0, 0.75, 1.05]

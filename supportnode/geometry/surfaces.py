@@ -9,6 +9,7 @@ Two methods share one result type:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,16 +105,16 @@ def detect_surfaces(
     keep = None
     if params.normal_filter and len(pts):
         keep = _normal_filter_mask(pts, params)
-    grid = voxelize(pts if keep is None else pts[keep], size)
+    used = pts if keep is None else pts[keep]
+    grid = voxelize(used, size)
+    # Point labels are kept in the grid's voxel order (contiguous per voxel) until the end.
     if params.method == "seed":
         surface_of_voxel, stats = _grow_seed(grid, params)
-        voxel_labels = surface_of_voxel[grid.point_voxel]
-        planes = None
+        sorted_labels = np.repeat(surface_of_voxel, grid.counts)
     elif params.method == "planar":
-        used = pts if keep is None else pts[keep]
         surface_of_voxel, planes, stats = _grow_planar(grid, params)
         tolerance = _surface_tolerance(surface_of_voxel, planes, params)
-        absorbed = _absorb_clutter(used, grid, surface_of_voxel, planes, tolerance, params)
+        absorbed = _absorb_clutter(grid, surface_of_voxel, planes, tolerance, params)
         stats["absorbed_voxels"] = len(absorbed)
         # Pieces of one board, split by the objects on it, meet once grown around them.
         sv = np.flatnonzero(surface_of_voxel >= 0)
@@ -125,24 +126,27 @@ def detect_surfaces(
         # Size limits apply to what a surface became: a board seen between objects is a
         # narrow strip until it has grown under and around them.
         stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params)
-        voxel_labels = _label_points_planar(used, grid, surface_of_voxel, planes, tolerance)
+        sorted_labels = _label_points_planar(grid, surface_of_voxel, planes, tolerance)
+        vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
         stats["clutter_points_rejected"] = _reject_tilted_clutter(
-            used, grid, voxel_labels, absorbed[surface_of_voxel[absorbed] >= 0], params
+            grid, sorted_labels, vetted, params
         )
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
-    labels = np.full(len(pts), -1, dtype=np.int64)
-    if keep is None:
-        labels[:] = voxel_labels
-    else:
-        labels[keep] = voxel_labels
-    surfaces, labels = _summarise(pts, labels, grid, surface_of_voxel, params)
+    surfaces, sorted_labels = _summarise(grid, sorted_labels, surface_of_voxel, params)
     if params.method == "planar":
-        surfaces, labels = _drop_unfit(surfaces, labels, params, sensor_origin)
+        surfaces, sorted_labels = _drop_unfit(grid, surfaces, sorted_labels, params, sensor_origin)
+    labels = np.full(len(pts), -1, dtype=np.int32)
+    if keep is None:
+        labels[grid.order] = sorted_labels
+    else:
+        used_labels = np.empty(len(used), dtype=np.int32)
+        used_labels[grid.order] = sorted_labels
+        labels[keep] = used_labels
     stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
     if keep is not None:
         stats["normal_filter_removed"] = int(len(pts) - keep.sum())
-    return SurfaceResult(surfaces=surfaces, labels=labels.astype(np.int32), stats=stats)
+    return SurfaceResult(surfaces=surfaces, labels=labels, stats=stats)
 
 
 def _check_points(points: np.ndarray) -> np.ndarray:
@@ -358,7 +362,6 @@ def _surface_tolerance(
 
 
 def _absorb_clutter(
-    pts: np.ndarray,
     grid: VoxelGrid,
     surface_of_voxel: np.ndarray,
     planes: _Planes,
@@ -396,18 +399,26 @@ def _absorb_clutter(
         pair = dst * (int(surface_of_voxel.max()) + 1) + surface_of_voxel[src]
         _, first_of_pair = np.unique(pair, return_index=True)
         src, dst = src[first_of_pair], dst[first_of_pair]
-        # Every point of each candidate voxel against the plane of the surface voxel beside it.
+        # Every point of each candidate voxel against the plane of the surface voxel beside it,
+        # read from the grid's contiguous corner-relative columns (1-D gathers of runs).
         n_pts = grid.counts[dst]
         first = np.cumsum(n_pts) - n_pts
-        pair_of_point = np.repeat(np.arange(len(dst)), n_pts)
         rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
-        point = grid.order[np.repeat(grid.starts[dst], n_pts) + rank]
-        normal = planes.normal[src][pair_of_point]
-        offset = pts[point] - planes.mean[src][pair_of_point]
-        dist = np.abs(np.einsum("ij,ij->i", offset, normal)) / normal[:, 2]
-        inlier = dist <= tolerance[surface_of_voxel[src]][pair_of_point]
+        pos = np.repeat(grid.starts[dst], n_pts) + rank
+        # The plane's point relative to the candidate voxel's corner, then per point.
+        rel = planes.mean[src] - grid.keys[dst] * grid.size
+        nrm = planes.normal[src]
+        offset = np.stack(
+            [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)], axis=1
+        )
+        dist = np.abs(
+            offset[:, 0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
+            + offset[:, 1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
+            + offset[:, 2]
+        )
+        inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
         n_in = np.add.reduceat(inlier.astype(np.int64), first)
-        xy = pts[point, :2]
+        xy = offset[:, :2]
         lo = np.minimum.reduceat(np.where(inlier[:, None], xy, np.inf), first, axis=0)
         hi = np.maximum.reduceat(np.where(inlier[:, None], xy, -np.inf), first, axis=0)
         # The inliers must themselves be a level patch: a ramp crosses a level plane in a
@@ -451,83 +462,116 @@ def _absorb_clutter(
     return np.concatenate(added) if added else np.zeros(0, dtype=np.int64)
 
 
-def _reject_tilted_clutter(
-    pts: np.ndarray,
+def _voxels_to_vet(
     grid: VoxelGrid,
-    labels: np.ndarray,
+    sorted_labels: np.ndarray,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
     absorbed: np.ndarray,
     params: SurfaceParams,
-) -> int:
-    """Unlabel, in place, surface points of cluttered voxels whose k-NN normal is tilted.
+) -> np.ndarray:
+    """Voxels whose surface points get the k-NN normal check: the cluttered voxels a surface
+    grew into, and, on smooth surfaces, voxels that are no surface voxel themselves but have
+    points within tolerance of the plane of the one above or below: the side face of a board
+    or a floor slab just under its top edge. (On a noisy surface that layer holds the noise,
+    whose k-NN normals scatter: it is left alone.)"""
+    vet = absorbed[surface_of_voxel[absorbed] >= 0]
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    if len(sv) == 0:
+        return vet
+    comp = surface_of_voxel[sv]
+    rough = _median_by_group(planes.roughness[sv], comp, int(comp.max()) + 1)
+    smooth = 30.0 * rough <= params.point_tolerance
+    label = np.maximum.reduceat(sorted_labels, grid.starts)  # a surface of the voxel, or -1
+    beside = (surface_of_voxel < 0) & (label >= 0)
+    beside[beside] = smooth[label[beside]]
+    return np.union1d(vet, np.flatnonzero(beside))
 
-    The report's normal filter, run only where it matters (its own suggested improvement):
-    within the point tolerance of a board lie the foot of the panel behind it and the bottom
-    rim of the objects on it; their neighbourhoods are not level. Returns points unlabelled."""
-    if len(absorbed) == 0:
+
+def _reject_tilted_clutter(
+    grid: VoxelGrid,
+    sorted_labels: np.ndarray,
+    vetted: np.ndarray,
+    params: SurfaceParams,
+) -> int:
+    """Unlabel, in place, surface points of the ``vetted`` voxels whose k-NN normal is tilted.
+
+    sorted_labels: (N,) labels in the grid's voxel order. The report's normal filter, run only
+    where it matters (its own suggested improvement): within the point tolerance of a board
+    lie the foot of the panel behind it, the bottom rim of the objects on it and the top of
+    its side faces; their neighbourhoods are not level (:func:`_voxels_to_vet`). Returns
+    points unlabelled."""
+    if len(vetted) == 0:
         return 0
-    in_absorbed = np.zeros(len(grid.counts), dtype=bool)
-    in_absorbed[absorbed] = True
-    query = np.flatnonzero((labels >= 0) & in_absorbed[grid.point_voxel])
-    if len(query) == 0:
-        return 0
-    # Neighbours come from the cluttered voxels, those beside them in their layer (a wall's
+    # Neighbours come from the vetted voxels, those beside them in their layer (a wall's
     # foot, an object's rim) and those just above and below.
     index = KeyIndex.build(grid.keys)
-    around = [absorbed]
+    around = [vetted]
     beside = [(dx, dy, 0) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
     for off in np.array([*beside, (0, 0, 1), (0, 0, -1)], dtype=np.int64):
-        j = index.find(grid.keys[absorbed] + off)
+        j = index.find(grid.keys[vetted] + off)
         around.append(j[j >= 0])
     vox = np.unique(np.concatenate(around))
     n_pts = grid.counts[vox]
     first = np.cumsum(n_pts) - n_pts
-    rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
-    support = pts[grid.order[np.repeat(grid.starts[vox], n_pts) + rank]]
+    pos = np.repeat(grid.starts[vox] - first, n_pts) + np.arange(n_pts.sum())
+    # Support points in voxel order (queries in that order find their neighbours in cache),
+    # relative to one corner: precise far from the origin, no (N, 3) row gathers.
+    rel = np.repeat(grid.keys[vox] - grid.keys[vox[0]], n_pts, axis=0) * grid.size
+    support = np.stack([grid.local[a][pos] for a in range(3)], axis=1) + rel
+    in_vetted = np.zeros(len(grid.counts), dtype=bool)
+    in_vetted[vetted] = True
+    query = np.flatnonzero(np.repeat(in_vetted[vox], n_pts) & (sorted_labels[pos] >= 0))
     k = min(params.clutter_normal_k, len(support))
-    if k < 3:
+    if len(query) == 0 or k < 3:
         return 0
     # An unbalanced tree builds in half the time and queries as fast on scan-like data.
     tree = cKDTree(support, balanced_tree=False, compact_nodes=False)
-    normal, _ = normals_at(tree, support, pts[query], k)
+    normal, _ = normals_at(tree, support, support[query], k)
     tilted = np.abs(normal[:, 2]) < np.cos(np.radians(params.normal_filter_max_tilt_deg))
-    labels[query[tilted]] = -1
+    sorted_labels[pos[query[tilted]]] = -1
     return int(tilted.sum())
 
 
 def _label_points_planar(
-    pts: np.ndarray,
     grid: VoxelGrid,
     surface_of_voxel: np.ndarray,
     planes: _Planes,
     tol_by_comp: np.ndarray,
 ) -> np.ndarray:
-    """A point is on a surface when it lies within tolerance of the plane of a surface voxel
+    """Surface label of each point, in the grid's voxel order (``grid.order``).
+
+    A point is on a surface when it lies within tolerance of the plane of a surface voxel
     in its own column: its own voxel, or the one just below or above (a noisy or
     layer-straddling surface spills into neighbouring layers)."""
-    labels = np.full(len(pts), -1, dtype=np.int64)
+    n = len(grid.order)
+    sorted_labels = np.full(n, -1, dtype=np.int64)
     sv = np.flatnonzero(surface_of_voxel >= 0)
     if len(sv) == 0:
-        return labels
+        return sorted_labels
     index = KeyIndex.build(grid.keys[sv])
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
     lx, ly, lz = grid.local
-    sorted_labels = np.full(len(pts), -1, dtype=np.int64)
-    best = np.full(len(pts), np.inf)
+    best = np.full(n, np.inf)
     for dz in (0, -1, 1):  # three column neighbours, each vectorised over voxels and points
-        hit = index.find(grid.keys + [0, 0, dz])
-        vsel = np.flatnonzero(hit >= 0)
-        if len(vsel) == 0:
-            continue
-        t = sv[hit[vsel]]
+        if dz == 0:
+            vsel = sv
+            t = sv
+        else:
+            hit = index.find(grid.keys + [0, 0, dz])
+            vsel = np.flatnonzero(hit >= 0)
+            if len(vsel) == 0:
+                continue
+            t = sv[hit[vsel]]
         # The plane of surface voxel t as z = A + bx*lx + by*ly in voxel vsel's local frame.
-        n = planes.normal[t]
-        bx, by = -n[:, 0] / n[:, 2], -n[:, 1] / n[:, 2]
+        nrm = planes.normal[t]
+        bx, by = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
         corner = grid.keys[vsel] * grid.size
         m = planes.mean[t]
         a = (m[:, 2] - corner[:, 2]) + bx * (corner[:, 0] - m[:, 0]) + by * (corner[:, 1] - m[:, 1])
         cnt = grid.counts[vsel]
         if len(vsel) == len(grid.counts):
-            pos = np.arange(len(pts))
+            pos = np.arange(n)
         else:
             pos = np.repeat(grid.starts[vsel] - (np.cumsum(cnt) - cnt), cnt) + np.arange(cnt.sum())
         dist = np.abs(
@@ -538,8 +582,7 @@ def _label_points_planar(
         better = (dist <= tol_by_comp[surf]) & (dist < best[pos])
         sorted_labels[pos[better]] = surf[better]
         best[pos[better]] = dist[better]
-    labels[grid.order] = sorted_labels
-    return labels
+    return sorted_labels
 
 
 def _median_by_group(values: np.ndarray, groups: np.ndarray, n: int) -> np.ndarray:
@@ -559,39 +602,58 @@ def _median_by_group(values: np.ndarray, groups: np.ndarray, n: int) -> np.ndarr
 
 
 def _summarise(
-    pts: np.ndarray,
-    comp_labels: np.ndarray,
     grid: VoxelGrid,
+    sorted_labels: np.ndarray,
     surface_of_voxel: np.ndarray,
     params: SurfaceParams,
 ) -> tuple[list[Surface], np.ndarray]:
-    """Per-surface properties from its points; surfaces sorted largest first, ids 0.."""
-    on = comp_labels >= 0
+    """Per-surface properties from its points; surfaces sorted largest first, ids 0..
+
+    sorted_labels: (N,) component of each point in the grid's voxel order; returns the
+    surfaces and the points' surface ids in that order."""
+    on = sorted_labels >= 0
     if not on.any():
-        return [], np.full(len(pts), -1, dtype=np.int64)
-    present = np.bincount(comp_labels[on])
+        return [], np.full(len(sorted_labels), -1, dtype=np.int64)
+    present = np.bincount(sorted_labels[on])
     comps = np.flatnonzero(present)
     s_count = len(comps)
     remap = np.full(len(present) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
     remap[comps] = np.arange(s_count)
-    # Surface points in voxel order (the grid's sort, reused): runs of one (voxel, surface)
-    # are reduced first, contiguously; surfaces are then sums over their runs.
-    in_order = on[grid.order]
-    idx = grid.order[in_order]
-    g = remap[comp_labels[idx]]
-    vox = grid.point_voxel[idx]
-    cut = np.empty(len(idx), dtype=bool)
-    cut[0] = True
+    # Runs of one (voxel, surface) are reduced first; surfaces are then sums over their runs.
+    # Most surface voxels hold points of one surface only: their run is the whole voxel, whose
+    # moments the grid already has. Only mixed voxels are reduced point by point.
+    labels_of_voxel = sorted_labels[grid.starts]
+    mismatch = sorted_labels != np.repeat(labels_of_voxel, grid.counts)
+    pure = np.add.reduceat(mismatch, grid.starts) == 0
+    pure_vox = np.flatnonzero(pure & (labels_of_voxel >= 0))
+    mixed = on & np.repeat(~pure, grid.counts)
+    g = remap[sorted_labels[mixed]]
+    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[mixed]
+    cut = np.empty(len(g), dtype=bool)
+    cut[:1] = True
     cut[1:] = (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])
     run = np.flatnonzero(cut)
-    run_g, run_vox = g[run], vox[run]
-    run_n = np.diff(np.append(run, len(idx)))
+    local = [c[mixed] for c in grid.local]
+
+    def reduce_runs(ufunc: np.ufunc, values: list[np.ndarray], pure_values: np.ndarray):
+        if len(run) == 0:  # reduceat needs at least one run
+            return pure_values
+        mixed_values = np.stack([ufunc.reduceat(v, run) for v in values], axis=1)
+        return np.concatenate([pure_values, mixed_values])
+
+    run_g = np.concatenate([remap[labels_of_voxel[pure_vox]], g[run]])
+    run_vox = np.concatenate([pure_vox, vox[run]])
+    run_n = np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))])
     corner = grid.keys[run_vox] * grid.size
-    local = [c[in_order] for c in grid.local]
-    r_sum = np.stack([np.add.reduceat(c, run) for c in local], axis=1)
-    r_outer = np.stack([np.add.reduceat(local[a] * local[b], run) for a, b in OUTER_INDEX], axis=1)
-    r_min = np.stack([np.minimum.reduceat(c, run) for c in local], axis=1) + corner
-    r_max = np.stack([np.maximum.reduceat(c, run) for c in local], axis=1) + corner
+    r_sum = reduce_runs(np.add, local, grid.sums[pure_vox])
+    r_outer = reduce_runs(
+        np.add, [local[a] * local[b] for a, b in OUTER_INDEX], grid.outer[pure_vox]
+    )
+    # Extremes of the pure voxels: one contiguous pass over all voxels, then picked.
+    v_min = np.stack([np.minimum.reduceat(c, grid.starts) for c in grid.local], axis=1)
+    v_max = np.stack([np.maximum.reduceat(c, grid.starts) for c in grid.local], axis=1)
+    r_min = reduce_runs(np.minimum, local, v_min[pure_vox]) + corner
+    r_max = reduce_runs(np.maximum, local, v_max[pure_vox]) + corner
 
     counts = np.bincount(run_g, weights=run_n, minlength=s_count)
     abs_sum = r_sum + corner * run_n[:, None]
@@ -656,10 +718,11 @@ def _summarise(
             )
         )
     new_id = np.append(new_id, -1)
-    return surfaces, new_id[remap[comp_labels]]
+    return surfaces, new_id[remap[sorted_labels]]
 
 
 def _drop_unfit(
+    grid: VoxelGrid,
     surfaces: list[Surface],
     labels: np.ndarray,
     params: SurfaceParams,
@@ -667,9 +730,11 @@ def _drop_unfit(
 ) -> tuple[list[Surface], np.ndarray]:
     """Final tests on each surface as a whole; ids stay in largest-first order.
 
+    labels: (N,) surface ids of the grid's points in its voxel order (``grid.order``).
     Size on measured areas and widths (growth could only bound them by whole cells); tilt of
     the plane fitted to all its points (sparse scan lines across a ramp look level voxel by
-    voxel); seen from above when the sensor position is known."""
+    voxel); seen from above when the sensor position is known; not the top of an object
+    standing on another surface (:func:`_object_tops`)."""
     cos_tilt = np.cos(np.radians(params.max_tilt_deg))
     below = np.inf if sensor_origin is None else float(np.asarray(sensor_origin)[2]) - 0.05
     keep = [
@@ -680,6 +745,8 @@ def _drop_unfit(
         and s.normal[2] >= cos_tilt
         and s.height < below
     ]
+    tops = _object_tops(grid, labels, keep, params)
+    keep = [s for s, top in zip(keep, tops, strict=True) if not top]
     if len(keep) == len(surfaces):
         return surfaces, labels
     new_id = np.full(len(surfaces) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
@@ -687,6 +754,145 @@ def _drop_unfit(
         new_id[s.id] = i
         s.id = i
     return keep, new_id[labels]
+
+
+# An object top is surrounded by its lower surface on at least this share of its outline (a
+# box against a wall still shows the worktop on its other sides) ...
+_TOP_MIN_AROUND = 0.25
+# ... and under its inner footprint that surface shows at most this share of the points it
+# has elsewhere per square metre: a solid box hides what it stands on, while the floor under
+# a table or a bench is seen at least in part.
+_TOP_MAX_SEEN = 0.2
+# Points enough to compare those densities (thinned evenly above this).
+_TOP_MAX_POINTS = 20_000
+# ... unless something stands on it: this many off-surface points over it, in cells where
+# nothing rises beyond object_top_max_height, make it a support after all (a cabinet on a desk holding a
+# globe is a place to put things; a bare microwave top is not).
+_TOP_MIN_LOAD = 30
+
+
+def _object_tops(
+    grid: VoxelGrid, labels: np.ndarray, surfaces: list[Surface], params: SurfaceParams
+) -> np.ndarray:
+    """(S,) bool: which surfaces are the tops of objects standing on another surface.
+
+    labels: (N,) surface ids in the grid's voxel order. A face is an object's top when it is
+    small (``object_top_max_area``), low above a surface lying around it
+    (``object_top_max_height``), and that surface is not seen under it. A table or a shelf
+    board differs in one of these: it is large, or high, or the floor or board below it
+    shows under it. One loop iteration per pair of surfaces (a few), vectorised inside."""
+    out = np.zeros(len(surfaces), dtype=bool)
+    max_area, max_height = params.object_top_max_area, params.object_top_max_height
+    small = [i for i, s in enumerate(surfaces) if s.area < max_area]
+    if max_area <= 0 or len(surfaces) < 2 or not small:
+        return out
+    cells = np.concatenate([s.cells for s in surfaces])
+    lo = cells.min(axis=0) - 1
+    span = int(cells[:, 1].max() - lo[1]) + 2
+
+    def lin(c: np.ndarray) -> np.ndarray:  # cells (C, 2) -> linear keys on a padded grid
+        return (c[:, 0] - lo[0]) * span + (c[:, 1] - lo[1])
+
+    keys = [lin(s.cells) for s in surfaces]  # distinct cells already
+    ring8 = np.array([span * dx + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy])
+    edge4 = np.array([span, -span, 1, -1])
+    below = {}  # small face -> the surfaces lying around it, a little lower, not plainly seen
+    for i in small:
+        s = surfaces[i]
+        ring = np.setdiff1d(keys[i][:, None] + ring8, keys[i])
+        inner = keys[i][np.isin(keys[i][:, None] + edge4, keys[i]).all(axis=1)]
+        below[i] = [
+            j
+            for j, t in enumerate(surfaces)
+            if params.max_step < s.height - t.height <= max_height
+            and np.isin(ring, keys[j]).mean() >= _TOP_MIN_AROUND
+            # Cells are coarse: a box's footprint cells also hold the worktop beside it, but
+            # a surface in most of the inner cells is plainly seen under the face.
+            and not (len(inner) and np.isin(inner, keys[j]).mean() >= 0.5)
+        ]
+        if not below[i]:
+            del below[i]  # nothing around it to stand on, or plainly seen under it
+    if not below:
+        return out
+    # Points of these faces and of the surfaces around them, in the faces' columns: xy and
+    # surface id, thinned to a bounded number (the test compares densities).
+    ids = np.array(
+        sorted(
+            {surfaces[i].id for i in below} | {surfaces[j].id for b in below.values() for j in b}
+        )
+    )
+    vox = np.flatnonzero(np.isin(lin(grid.keys[:, :2]), np.concatenate([keys[i] for i in below])))
+    n_pts = grid.counts[vox]
+    pos = np.repeat(grid.starts[vox] - (np.cumsum(n_pts) - n_pts), n_pts) + np.arange(n_pts.sum())
+    pos = pos[np.isin(labels[pos], ids)]
+    step = max(1, len(pos) // _TOP_MAX_POINTS)
+    pos = pos[::step]
+    v = np.searchsorted(grid.starts, pos, side="right") - 1
+    xy = (
+        np.stack([grid.local[0][pos], grid.local[1][pos]], axis=1)
+        + grid.keys[v, :2] * grid.size[:2]
+    )
+    sid = labels[pos]
+    for i, under in below.items():
+        s = surfaces[i]
+        inner, (origin, cell) = _inner_footprint(xy[sid == s.id], s.area)
+        if inner is None:
+            continue  # too small to tell what lies under it: keep
+        for j in under:
+            t = surfaces[j]
+            f = np.floor((xy[sid == t.id] - origin) / cell).astype(np.int64)
+            ok = np.all((f >= 0) & (f < inner.shape[::-1]), axis=1)
+            seen = int(inner[f[ok, 1], f[ok, 0]].sum())
+            expected = t.point_count / step / max(t.area, 1e-9) * inner.sum() * cell**2
+            if seen <= _TOP_MAX_SEEN * expected:
+                out[i] = True
+                break
+    for i in np.flatnonzero(out):  # a few object tops: do they carry something?
+        out[i] = _load(grid, labels, keys[i], lin, surfaces[i].height, params) < _TOP_MIN_LOAD
+    return out
+
+
+def _load(
+    grid: VoxelGrid,
+    labels: np.ndarray,
+    cells: np.ndarray,
+    lin: Callable[[np.ndarray], np.ndarray],
+    height: float,
+    params: SurfaceParams,
+) -> int:
+    """Off-surface points over the ``cells`` (linear keys) of a face at ``height``, from
+    2 ``point_tolerance`` to ``object_top_max_height`` above it, in cells where nothing rises
+    higher (a wall beside the face shares its edge cells and goes on up)."""
+    vox = np.flatnonzero(np.isin(lin(grid.keys[:, :2]), cells))
+    if len(vox) == 0:
+        return 0
+    n_pts = grid.counts[vox]
+    pos = np.repeat(grid.starts[vox] - (np.cumsum(n_pts) - n_pts), n_pts) + np.arange(n_pts.sum())
+    v = np.repeat(vox, n_pts)
+    z = grid.local[2][pos] + grid.keys[v, 2] * grid.size[2]
+    cell = lin(grid.keys[v, :2])
+    tall = np.unique(cell[z > height + params.object_top_max_height])
+    above = (z > height + 2 * params.point_tolerance) & (labels[pos] < 0)
+    return int((above & ~np.isin(cell, tall)).sum())
+
+
+def _inner_footprint(
+    xy: np.ndarray, area: float
+) -> tuple[np.ndarray | None, tuple[np.ndarray, float]]:
+    """Raster of the inside of a face from its (P, 2) points and area: image[iy, ix] on square
+    cells of twice the point spacing, with stray lines (a wall's edge picked up at the same
+    height) opened away and one cell of margin eroded; None when nothing is left. Returns
+    (image, (origin xy, cell))."""
+    if len(xy) == 0 or area <= 0:
+        return None, (np.zeros(2), 1.0)
+    cell = 2.0 * float(np.sqrt(area / len(xy)))
+    origin = xy.min(axis=0) - 2 * cell
+    f = np.floor((xy - origin) / cell).astype(np.int64)
+    img = np.zeros((int(f[:, 1].max()) + 3, int(f[:, 0].max()) + 3), dtype=bool)
+    img[f[:, 1], f[:, 0]] = True
+    img = ndimage.binary_fill_holes(ndimage.binary_closing(img))
+    img = ndimage.binary_erosion(ndimage.binary_opening(img))
+    return (img if img.any() else None), (origin, cell)
 
 
 def _weighted_median(

@@ -53,6 +53,8 @@ class KeyIndex:
     dims: np.ndarray  # (3,) int64: padded extent, so key +- 1 never wraps
     sorted_lin: np.ndarray  # (M,) int64 ascending
     order: np.ndarray  # (M,) int64: voxel index of each sorted entry
+    # (prod(dims),) int32 voxel index by linear key, -1 where empty; None for a sparse extent
+    table: np.ndarray | None = None
 
     @classmethod
     def build(cls, keys: np.ndarray) -> KeyIndex:
@@ -62,11 +64,17 @@ class KeyIndex:
             return cls(z, np.ones(3, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
         origin = keys.min(axis=0) - 1
         dims = keys.max(axis=0) - origin + 2
-        if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+        cells = float(np.prod(dims.astype(np.float64)))
+        if cells >= 2.0**62:
             raise InputError("voxel grid too large to index (extent / voxel size overflows)")
         lin = cls._linear(keys, origin, dims)
         order = np.argsort(lin, kind="stable")
-        return cls(origin, dims, lin[order], order)
+        table = None
+        if cells <= max(1 << 18, 32 * len(keys)):
+            # A dense extent (a room at 0.1 m is ~1e5 cells): direct lookup, no binary search.
+            table = np.full(int(cells), -1, dtype=np.int32)
+            table[lin[order[::-1]]] = order[::-1]  # duplicate keys: the first voxel wins
+        return cls(origin, dims, lin[order], order, table)
 
     @staticmethod
     def _linear(keys: np.ndarray, origin: np.ndarray, dims: np.ndarray) -> np.ndarray:
@@ -80,6 +88,8 @@ class KeyIndex:
         k = keys - self.origin
         inside = np.all((k >= 0) & (k < self.dims), axis=1)
         lin = (k[:, 0] * self.dims[1] + k[:, 1]) * self.dims[2] + k[:, 2]
+        if self.table is not None:
+            return np.where(inside, self.table[np.where(inside, lin, 0)], -1).astype(np.int64)
         pos = np.searchsorted(self.sorted_lin, lin)
         pos = np.minimum(pos, len(self.sorted_lin) - 1)
         hit = inside & (self.sorted_lin[pos] == lin)
@@ -174,19 +184,37 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
         raise InputError("voxel grid too large to index (extent / voxel size overflows)")
     k = [kcols[a].astype(np.int64) - origin[a] for a in range(3)]
     lin = (k[0] * dims[1] + k[1]) * dims[2] + k[2]
-    # Sorting is the one O(N log N) step; everything after it is contiguous reductions.
-    order = argsort_keys(lin, top=int(np.prod(dims)) - 1)
-    lin_sorted = lin[order]
-    new = np.empty(n, dtype=bool)
-    new[0] = True
-    np.not_equal(lin_sorted[1:], lin_sorted[:-1], out=new[1:])
-    starts = np.flatnonzero(new)
-    counts = np.diff(np.append(starts, n))
-    point_voxel = np.empty(n, dtype=np.int64)
-    point_voxel[order] = np.cumsum(new) - 1
-    first = order[starts]
-    vkeys = np.stack([k[a][first] + origin[a] for a in range(3)], axis=1)
-    local = [cols[a][order] - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)]
+    top = int(np.prod(dims)) - 1
+    if top < max(8 * n, 1 << 20):
+        # Few possible keys (the usual case: a room is ~1e5 voxels): a counting pass ranks
+        # the occupied keys, and sorting the points by that rank (< 2^16 voxels: one 16-bit
+        # radix pass) replaces the sort of the linear keys; the rank is each point's voxel.
+        occupied = np.bincount(lin, minlength=top + 1)
+        lin_of_voxel = np.flatnonzero(occupied)
+        counts = occupied[lin_of_voxel]
+        rank = np.zeros(top + 1, dtype=np.int64)
+        rank[lin_of_voxel] = np.arange(len(lin_of_voxel))
+        point_voxel = rank[lin]
+        order = argsort_keys(point_voxel, top=len(lin_of_voxel) - 1)
+        starts = np.cumsum(counts) - counts
+        rem, kz = np.divmod(lin_of_voxel, dims[2])
+        kx, ky = np.divmod(rem, dims[1])
+        vkeys = np.stack([kx, ky, kz], axis=1) + origin
+    else:
+        # Sorting is the one O(N log N) step; everything after it is contiguous reductions.
+        order = argsort_keys(lin, top=top)
+        lin_sorted = lin[order]
+        new = np.empty(n, dtype=bool)
+        new[0] = True
+        np.not_equal(lin_sorted[1:], lin_sorted[:-1], out=new[1:])
+        starts = np.flatnonzero(new)
+        counts = np.diff(np.append(starts, n))
+        point_voxel = np.empty(n, dtype=np.int64)
+        point_voxel[order] = np.cumsum(new) - 1
+        first = order[starts]
+        vkeys = np.stack([k[a][first] + origin[a] for a in range(3)], axis=1)
+    # np.take gathers faster than fancy indexing; the gathers are the costliest step here.
+    local = [np.take(cols[a], order) - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)]
     sums = np.stack([np.add.reduceat(c, starts) for c in local], axis=1)
     outer = np.stack([np.add.reduceat(local[a] * local[b], starts) for a, b in OUTER_INDEX], axis=1)
     return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts, local)
