@@ -132,6 +132,36 @@ def test_gravity_given_rotates_results(rng):
     assert d.gauges["gravity_source"] == 1.0
 
 
+def test_gravity_estimated_without_imu_levels_results(rng):
+    """No gravity in the scans, gravity.enabled: the node fits up from the normals of a floor
+    and a table seen by a sensor rolled 20 deg and pitched 10 deg, publishes the correction,
+    and the surfaces come out level at their heights below the sensor."""
+    import dataclasses
+
+    roll, pitch = np.radians(20), np.radians(10)
+    rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
+    ry = np.array(
+        [[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]]
+    )
+    r = ry @ rx
+    world = np.vstack(
+        [plane_points(rng, -3, 3, -3, 3, -1.5, 40000), _platform(rng, 0.5, 0.5, z=-0.75)]
+    )
+    p = DetectParams()
+    p = dataclasses.replace(p, gravity=dataclasses.replace(p.gravity, enabled=True))
+    with Node(p) as node:
+        for i in range(3):
+            cloud = PointCloud.from_xyz(world @ r.T, 1.0 + 0.1 * i, "lidar", seq=i + 1)
+            out = node.process(cloud)
+        d = node.diagnostics()
+    assert d.gauges["gravity_source"] == 2.0  # estimated
+    tilt = np.degrees(np.arccos(np.clip((r @ [0, 0, 1])[2], -1, 1)))
+    assert d.gauges["gravity_tilt_deg"] == pytest.approx(tilt, abs=0.5)
+    heights = sorted(round(s.height, 2) for s in out.surfaces.surfaces)
+    assert heights == [-1.5, -0.75]
+    assert all(s.normal[2] > np.cos(np.radians(1.0)) for s in out.surfaces.surfaces)
+
+
 def test_quaternion_matrix_matches_pose_from_matrix():
     a = np.radians(33)
     r = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
