@@ -123,6 +123,20 @@ class SurfaceParams:
         "m",
         min=0.0,
     )
+    plateau_min_step: float = param(
+        0.012,
+        "planar: a part of a surface that rises by a step at least this high (and at least "
+        "the point tolerance) above the rest around it is a flat object lying on it (a "
+        "cutting board, a plate), not surface; smooth slopes and warps are no steps; 0: off",
+        "m",
+        min=0.0,
+    )
+    plateau_max_area: float = param(
+        0.3,
+        "planar: such a raised part is an object only up to this footprint area",
+        "m^2",
+        min=0.0,
+    )
 
 
 @dataclass(frozen=True)

@@ -328,3 +328,94 @@ def test_box_top_that_holds_something_stays_a_surface(rng):
     tin = np.c_[0.5 + 0.04 * np.cos(t), 0.4 + 0.04 * np.sin(t), rng.uniform(1.06, 1.2, 1500)]
     loaded = detect_surfaces(np.vstack([floor, table, box, legs, wall, tin]))
     assert sorted(round(s.height, 2) for s in loaded.surfaces) == [0.0, 0.75, 1.05]
+
+
+def _flat_object(rng, shape, centre, height, top, density=25000.0):
+    """A thin object lying on a surface at ``top``: a board (0.4 x 0.25 m, turned 10 deg) or
+    a plate (radius 0.12 m), ``height`` thick; its top and rim at ``density`` points/m^2.
+    Returns (points on it, a function telling which (P, 2) xy lie under it)."""
+    if shape == "board":
+        half, turn = np.array([0.2, 0.125]), np.radians(10.0)
+        rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+
+        def under(xy):
+            return np.all(np.abs((xy - centre) @ rot) <= half, axis=1)
+
+        u = rng.uniform(-1, 1, (int(density * 4 * half.prod()), 2)) * half
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
+        rim = []
+        for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
+            k = int(density * np.linalg.norm(b - a) * height)
+            rim.append(a + rng.uniform(0, 1, (k, 1)) * (b - a))
+        top_xy, side_xy = u @ rot.T, np.vstack(rim) @ rot.T
+    else:
+        radius = 0.12
+
+        def under(xy):
+            return np.hypot(*(xy - centre).T) <= radius
+
+        r = radius * np.sqrt(rng.uniform(0, 1, int(density * np.pi * radius**2)))
+        a = rng.uniform(0, 2 * np.pi, len(r))
+        top_xy = np.c_[r * np.cos(a), r * np.sin(a)]
+        a = rng.uniform(0, 2 * np.pi, int(density * 2 * np.pi * radius * height))
+        side_xy = radius * np.c_[np.cos(a), np.sin(a)]
+    pts = np.vstack(
+        [
+            np.c_[top_xy + centre, np.full(len(top_xy), top + height)],
+            np.c_[side_xy + centre, rng.uniform(top, top + height, len(side_xy))],
+        ]
+    )
+    return pts, under
+
+
+@pytest.mark.parametrize("shape", ["board", "plate"])
+@pytest.mark.parametrize("top", [0.73, 0.75, 0.765])
+def test_board_or_plate_lying_on_a_table_is_not_part_of_it(rng, shape, top):
+    """A cutting board or a plate, 2 cm high, lies on a table: growth across height layers
+    (within max_step) joins it to the table, but it is a raised plateau, not table."""
+    floor = plane_points(rng, -1, 2.2, -1, 1.8, 0.0, 80000)
+    table = plane_points(rng, 0, 1.2, 0, 0.8, top, 24000)
+    centre = np.array([0.45, 0.4])
+    obj, under = _flat_object(rng, shape, centre, 0.02, top)
+    table = table[~under(table[:, :2])]
+    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], top - 0.02)
+    pts = np.vstack([floor, table, obj, legs])
+    on_obj = np.arange(len(floor) + len(table), len(floor) + len(table) + len(obj))
+    on_table = np.arange(len(floor), len(floor) + len(table))
+    res = detect_surfaces(pts)
+    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, round(top, 2)]
+    assert res.stats["plateau_voxels"] > 0
+    top_of_obj = on_obj[pts[on_obj, 2] > top + 0.015]
+    assert (res.labels[top_of_obj] >= 0).mean() < 0.02
+    assert (res.labels[on_table] >= 0).mean() > 0.97
+    # Without the plateau test the object's top is table.
+    joined = detect_surfaces(pts, SurfaceParams(plateau_min_step=0.0))
+    assert (joined.labels[top_of_obj] >= 0).mean() > 0.5
+
+
+def test_warped_table_and_table_with_small_dip_stay_whole(rng):
+    """Smooth warps predict their neighbours: no step, nothing cut out. A dip is lower than
+    the table around it: not an object lying on it."""
+    warped = plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000)
+    warped[:, 2] += 0.02 * np.sin(np.pi * warped[:, 0] / 1.2) * np.sin(np.pi * warped[:, 1] / 0.8)
+    dipped = plane_points(rng, 3, 4.2, 0, 0.8, 0.75, 24000)
+    dip = np.hypot(dipped[:, 0] - 3.6, dipped[:, 1] - 0.4) < 0.15
+    dipped[dip, 2] -= 0.02
+    for pts in (warped, dipped):
+        res = detect_surfaces(pts)
+        assert len(res.surfaces) == 1
+        assert (res.labels >= 0).mean() > 0.97
+
+
+@pytest.mark.parametrize(("deg", "max_tilt"), [(6, 10.0), (8, 10.0), (10, 20.0)])
+def test_gentle_ramp_joined_to_a_floor_stays_whole(rng, deg, max_tilt):
+    """A ramp up to a landing: its voxels are tilted but each predicts the next; the landing
+    at its top is no plateau lying on it."""
+    floor = plane_points(rng, -1, 0, 0, 1.0, 0.0, 25000)
+    ramp = plane_points(rng, 0, 1.2, 0, 1.0, 0.0, 30000)
+    ramp[:, 2] = np.tan(np.radians(deg)) * ramp[:, 0]
+    landing = plane_points(rng, 1.2, 1.45, 0, 1.0, np.tan(np.radians(deg)) * 1.2, 6000)
+    pts = np.vstack([floor, ramp, landing])
+    res = detect_surfaces(pts, SurfaceParams(max_tilt_deg=max_tilt))
+    assert len(res.surfaces) == 1
+    assert (res.labels >= 0).mean() > 0.97

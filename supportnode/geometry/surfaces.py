@@ -4,7 +4,8 @@ Two methods share one result type:
 - ``seed``: Algorithm 1 of the report as published (voxels with more than ``p_min`` points, grown
   through horizontally adjacent voxels of the same height layer, regions of ``psi_min`` voxels).
 - ``planar`` (default): per-voxel plane fits from moments; only flat, near-horizontal voxels grow;
-  growth may cross height layers within ``max_step``; minimum area and width in metres.
+  growth may cross height layers within ``max_step`` (flat objects lying on a surface, raised
+  by a step, are cut out again); minimum area and width in metres.
 """
 
 from __future__ import annotations
@@ -118,14 +119,21 @@ def detect_surfaces(
         stats["absorbed_voxels"] = len(absorbed)
         # Pieces of one board, split by the objects on it, meet once grown around them.
         sv = np.flatnonzero(surface_of_voxel >= 0)
+        edges: list = []
         if len(sv):
             surface_of_voxel[sv] = _connect(
-                grid.keys[sv], planes.mean[sv], planes.normal[sv], params
+                grid.keys[sv], planes.mean[sv], planes.normal[sv], params, edges=edges
             )
             tolerance = _surface_tolerance(surface_of_voxel, planes, params)
         # Size limits apply to what a surface became: a board seen between objects is a
         # narrow strip until it has grown under and around them.
         stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params)
+        # A cutting board or a plate joins the worktop it lies on: cut it out again.
+        stats["plateau_voxels"] = (
+            _drop_raised_plateaus(grid, surface_of_voxel, planes, tolerance, sv, *edges, params)
+            if edges
+            else 0
+        )
         sorted_labels = _label_points_planar(grid, surface_of_voxel, planes, tolerance)
         vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
         stats["clutter_points_rejected"] = _reject_tilted_clutter(
@@ -260,12 +268,15 @@ def _connect(
     normal: np.ndarray,
     params: SurfaceParams,
     bridge: bool = True,
+    edges: list | None = None,
 ) -> np.ndarray:
     """Component of each (M, 3)-keyed voxel: neighbours join when each one's plane, extended
     to the other's point, meets it within max_step (a step, a wall top beside a table or a
-    shelf board above another does not join)."""
+    shelf board above another does not join). The joined pairs of adjacent voxels (src,
+    dst), bridged ones left out, are appended to ``edges`` when given."""
     index = KeyIndex.build(keys)
-    offsets = layered_offsets(params.connectivity)
+    src, dst = index.neighbour_pairs(keys, layered_offsets(params.connectivity))
+    n_adjacent = len(src)
     if bridge and params.bridge_cells > 0:
         # Sparse scan lines far from a lidar leave empty cells between the rings of a floor.
         r = params.bridge_cells + 1
@@ -279,12 +290,15 @@ def _connect(
             ],
             dtype=np.int64,
         )
-        offsets = np.concatenate([offsets, far])
-    src, dst = index.neighbour_pairs(keys, offsets)
+        far_src, far_dst = index.neighbour_pairs(keys, far)
+        src, dst = np.concatenate([src, far_src]), np.concatenate([dst, far_dst])
     d = mean[dst] - mean[src]
     gap_src = np.abs(np.einsum("ij,ij->i", d, normal[src])) / normal[src, 2]
     gap_dst = np.abs(np.einsum("ij,ij->i", d, normal[dst])) / normal[dst, 2]
     joined = np.maximum(gap_src, gap_dst) <= params.max_step
+    if edges is not None:
+        near = joined[:n_adjacent]
+        edges.extend((src[:n_adjacent][near], dst[:n_adjacent][near]))
     return _components(len(keys), src[joined], dst[joined])
 
 
@@ -309,6 +323,124 @@ def _filter_components(grid: VoxelGrid, surface_of_voxel: np.ndarray, params: Su
         keep_comp[c] = footprint_width(cells, (vx, vy)) >= params.min_width
     surface_of_voxel[sv[~keep_comp[comp]]] = -1
     return int(len(big) - keep_comp.sum())
+
+
+# A raised piece of a surface is an object lying on it only when the surface's main piece
+# covers at least this share of the cells around it (a rim around a dip, or a piece at the
+# surface's edge, is not surrounded by the rest).
+_PLATEAU_MIN_AROUND = 0.5
+
+
+def _drop_raised_plateaus(
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    tolerance: np.ndarray,
+    sv: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    params: SurfaceParams,
+) -> int:
+    """Take, in place, raised plateaus out of the surfaces; returns the voxels taken out.
+
+    Growth crosses height layers within max_step, so a cutting board or a plate (2 cm high)
+    joins the worktop it lies on. Within each surface, the joined pairs of adjacent voxels
+    (src, dst: indices into the voxels ``sv``) are cut where either voxel's plane, extended to
+    the other's cell centre, misses the other's plane there, or where their heights at their
+    centres differ, by more than the step (``plateau_min_step``, at least the surface's point
+    tolerance): a warp or a gentle slope predicts its neighbours, a step does not. (On a
+    steeper ramp level heights differ from cell to cell, but its pieces do not rise above
+    each other.) A piece that is not its surface's largest, rises above the pieces across
+    its cuts (both planes' misses, median over the cuts), is small (``plateau_max_area``)
+    and is surrounded by the largest piece (``_PLATEAU_MIN_AROUND`` of the cells around it)
+    is an object lying on the surface. A dip is lower, a table's rim around a dip is not
+    surrounded by it, pieces of a ramp do not rise, pieces of a floor between a lidar's rings
+    meet no cut. ``planes`` of the voxels just beside a plateau may change (see below)."""
+    if params.plateau_min_step <= 0 or len(src) == 0:
+        return 0
+    comp = surface_of_voxel[sv]
+    keep = comp[src] >= 0  # pairs of a surface that is kept (both ends: one surface)
+    src, dst = src[keep], dst[keep]
+    # Each voxel's plane as its height h at the cell centre and its slopes (sx, sy).
+    nrm, mean = planes.normal[sv], planes.mean[sv]
+    sx, sy = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
+    kx, ky = grid.keys[sv, 0], grid.keys[sv, 1]
+    vx, vy = float(grid.size[0]), float(grid.size[1])
+    h = mean[:, 2] + sx * ((kx + 0.5) * vx - mean[:, 0]) + sy * ((ky + 0.5) * vy - mean[:, 1])
+    dx, dy = (kx[dst] - kx[src]) * vx, (ky[dst] - ky[src]) * vy
+    dh = h[dst] - h[src]
+    miss_dst = sx[src] * dx + sy[src] * dy - dh  # src's plane at dst's centre, minus dst's
+    miss_src = dh - sx[dst] * dx - sy[dst] * dy  # dst's plane at src's centre, minus src's
+    step = np.maximum(params.plateau_min_step, tolerance)
+    step_e = step[comp[src]]
+    # A level neighbour of a step's voxel sees the step (dh) although the plane fitted across
+    # the step, tilted, continues into both sides.
+    cut = (np.abs(miss_dst) > step_e) | (np.abs(miss_src) > step_e) | (np.abs(dh) > step_e)
+    if not cut.any():
+        return 0
+    piece = _components(len(sv), src[~cut], dst[~cut])
+    n_pieces = int(piece.max()) + 1
+    of_piece = np.full(n_pieces, -1, dtype=np.int64)  # surface of each piece (-1: dropped)
+    of_piece[piece] = comp
+    size = np.bincount(piece, minlength=n_pieces)
+    # The main piece of each surface: its largest.
+    order = np.lexsort((-size, of_piece))
+    first = np.r_[True, of_piece[order][1:] != of_piece[order][:-1]]
+    main = np.zeros(n_pieces, dtype=bool)
+    main[order[first]] = True
+    main &= of_piece >= 0
+    # Rise of each piece across its cuts: the mean of both planes' misses, seen from it.
+    cs, cd = src[cut], dst[cut]
+    rise = 0.5 * (miss_dst[cut] - miss_src[cut])  # of src's piece over dst's
+    rise = _median_by_group(np.r_[rise, -rise], np.r_[piece[cs], piece[cd]], n_pieces)
+    cand = ~main & (of_piece >= 0) & (rise >= 0.5 * step[np.maximum(of_piece, 0)])
+    if not cand.any():
+        return 0
+    # Footprint cells (linear keys on a padded grid) of the candidates and of the main pieces;
+    # the share of the cells around a candidate that its surface's main piece covers.
+    lo_x, lo_y = int(kx.min()) - 1, int(ky.min()) - 1
+    span = int(ky.max()) - lo_y + 2
+    ncell = (int(kx.max()) - lo_x + 2) * span
+    lin = (kx - lo_x) * span + (ky - lo_y)
+    in_cand = cand[piece]
+    cand_cells = np.unique(piece[in_cand] * ncell + lin[in_cand])
+    c_piece = cand_cells // ncell
+    small = np.bincount(c_piece, minlength=n_pieces) * vx * vy <= params.plateau_max_area
+    ring8 = np.array([span * i + j for i in (-1, 0, 1) for j in (-1, 0, 1) if i or j])
+    ring = np.unique((cand_cells[:, None] + ring8).ravel())
+    ring = ring[~np.isin(ring, cand_cells)]
+    r_piece = ring // ncell
+    main_of = np.zeros(int(comp.max()) + 1, dtype=np.int64)
+    main_of[of_piece[main]] = np.flatnonzero(main)
+    in_main = main[piece]
+    main_cells = np.unique(piece[in_main] * ncell + lin[in_main])
+    around = np.isin(main_of[of_piece[r_piece]] * ncell + ring % ncell, main_cells)
+    share = np.bincount(r_piece, weights=around, minlength=n_pieces) / np.maximum(
+        np.bincount(r_piece, minlength=n_pieces), 1
+    )
+    drop = cand & small & (share >= _PLATEAU_MIN_AROUND)
+    if not drop.any():
+        return 0
+    gone = drop[piece]
+    # A voxel across a plateau's edge holds surface and the plateau's rim: its plane, tilted,
+    # meets the plateau's top. It takes the plane of its most level neighbour when that is
+    # more level (as absorbed clutter carries a plane over), so that its surface points stay
+    # on and the plateau's are left off.
+    a, b = np.r_[src[cut], dst[cut]], np.r_[dst[cut], src[cut]]
+    edge = np.zeros(len(sv), dtype=bool)
+    edge[a[gone[b] & ~gone[a]]] = True
+    a, b = np.r_[src, dst], np.r_[dst, src]
+    ok = edge[a] & ~gone[b] & (nrm[b, 2] > nrm[a, 2])
+    a, b = a[ok], b[ok]
+    if len(a):
+        order = np.lexsort((-nrm[b, 2], a))
+        a, b = a[order], b[order]
+        first = np.r_[True, a[1:] != a[:-1]]
+        to, by = sv[a[first]], sv[b[first]]
+        planes.mean[to] = planes.mean[by]
+        planes.normal[to] = planes.normal[by]
+    surface_of_voxel[sv[gone]] = -1
+    return int(gone.sum())
 
 
 def _unique_cells(cells: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
