@@ -75,3 +75,38 @@ def test_bad_input() -> None:
         estimate_normals(bad)
     with pytest.raises(InputError, match="candidate_mask"):
         filter_vertical_normals(np.random.default_rng(0).random((10, 3)), np.ones(9, bool))
+
+
+def test_bounded_search_matches_plain_search(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The search radius from a sample only prunes: same neighbours, same normals, also
+    where a cloud's density varies (sparse points need the unbounded fallback)."""
+    import supportnode.geometry.normals as mod
+
+    rng = np.random.default_rng(5)
+    dense = rng.normal(size=(30000, 3)) * [1, 1, 0.02]
+    sparse = rng.uniform(-20, 20, (2000, 3))
+    pts = np.concatenate([dense, sparse])
+    a, ca = estimate_normals(pts, k=30)
+    monkeypatch.setattr(mod, "_BOUND_MIN_QUERIES", 10**9)
+    b, cb = estimate_normals(pts, k=30)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_allclose(ca, cb, atol=1e-12)
+
+
+def test_sym3_eigen_matches_eigh() -> None:
+    from supportnode.geometry.linalg import sym3_eigen
+
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(500, 3, 3))
+    cov = a @ a.transpose(0, 2, 1)
+    v = rng.normal(size=(100, 3))
+    cov[:100] = v[:, :, None] * v[:, None, :] + np.eye(3) * 1e-3  # two equal eigenvalues
+    evals, vec = sym3_eigen(cov)
+    ref_vals, ref_vec = np.linalg.eigh(cov)
+    # The trigonometric form loses digits at repeated eigenvalues: ~1e-8 of the largest.
+    np.testing.assert_allclose(evals, ref_vals, atol=1e-6 * np.abs(ref_vals).max())
+    cos = np.abs(np.einsum("ij,ij->i", vec, ref_vec[:, :, 0]))
+    assert cos[100:].min() > 1 - 1e-9  # the smallest eigenvalue is simple there
+    e0, n0 = sym3_eigen(np.zeros((2, 3, 3)))
+    np.testing.assert_array_equal(n0, [[0, 0, 1.0], [0, 0, 1.0]])
+    assert (e0 == 0).all()

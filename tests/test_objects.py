@@ -372,3 +372,67 @@ def test_flat_wall_cluster_has_a_line_footprint_and_a_thin_box():
     assert big.point_count > 0.9 * n
     assert big.obb_size[0] == pytest.approx(4.0, abs=0.05) and big.obb_size[1] < 0.01
     assert len(big.footprint) == 2
+
+
+def test_boxes_of_different_heights_face_to_face_split():
+    """One rectangular footprint, no neck: only the top height steps (the simulator's
+    box_1 + box_2). A box on a box (a toy car's cabin on its body) stays one object."""
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    tall = box((0.0, 0.0, 0.0), (0.3, 0.2, 0.15))
+    low = box((0.3, 0.0, 0.0), (0.5, 0.2, 0.1))
+    low = low[low[:, 0] > 0.3 + 1e-9]  # the shared face belongs to the tall box
+    pts = np.concatenate([tall, low])
+    res = detect_objects(pts, SurfaceResult([floor], np.full(len(pts), -1, np.int32)))
+    assert len(res.clusters) == 2 and res.stats["step_splits"] == 1
+    a, b = sorted(res.clusters, key=lambda c: c.centroid[0])
+    assert a.height == pytest.approx(0.15) and b.height == pytest.approx(0.1)
+    assert (res.labels[: len(tall)] == a.id).mean() > 0.95
+    assert (res.labels[len(tall) :] == b.id).mean() > 0.95
+    body = box((0.0, 0.0, 0.0), (0.4, 0.2, 0.1))
+    cabin = box((0.1, 0.0, 0.1), (0.3, 0.2, 0.18))
+    car = np.concatenate([body, cabin])
+    res = detect_objects(car, SurfaceResult([floor], np.full(len(car), -1, np.int32)))
+    assert len(res.clusters) == 1
+
+
+def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPatch):
+    """The speed-ups of the voxel method give the same answer as the straightforward code."""
+    import scipy.ndimage as ndi
+
+    import supportnode.geometry.objects as mod
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):  # hole filling by one labelling == binary_fill_holes
+        mask = rng.random((rng.integers(3, 40), rng.integers(3, 40))) < rng.uniform(0.3, 0.8)
+        np.testing.assert_array_equal(mod._fill_holes(mask), ndi.binary_fill_holes(mask))
+    lab = rng.integers(-1, 300, 5000)
+    np.testing.assert_array_equal(mod._group_by_label(lab), np.argsort(lab, kind="stable"))
+
+    # Points on vertical lines: dropping the inner ones keeps the hull and its volume.
+    xy = rng.uniform(0, 1, (300, 2))
+    p = np.c_[np.repeat(xy, 10, axis=0), rng.uniform(0, 1, 3000)]
+    keep = mod._column_ends(p)
+    assert keep.sum() <= 600
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    monkeypatch.setattr(mod, "_COLUMN_DEDUPE_MIN", 10**9)
+    ref_fp, ref_vol = mod._hulls(p, lo, hi)
+    monkeypatch.setattr(mod, "_COLUMN_DEDUPE_MIN", 1)
+    fp, vol = mod._hulls(p, lo, hi)
+    assert vol == pytest.approx(ref_vol, rel=1e-12)
+    assert sorted(map(tuple, fp)) == sorted(map(tuple, ref_fp))
+
+    # Support look-up in one pass == surface by surface; dense voxel ids == sorted keys.
+    surfaces = [
+        make_surface(0, 0.0, -1, 1, -1, 1),
+        make_surface(1, 0.4, -0.5, 0.3, -0.2, 0.6),
+        make_surface(2, 0.8, 0.0, 0.6, 0.1, 0.5),
+    ]
+    cp = np.c_[rng.uniform(-1.2, 1.2, (20000, 2)), rng.uniform(-0.1, 1.5, 20000)]
+    fast = mod._support_below(cp, surfaces, 0.05)
+    with monkeypatch.context() as m:
+        m.setattr(mod._SupportTable, "build", classmethod(lambda cls, lookups, tol: None))
+        np.testing.assert_array_equal(fast, mod._support_below(cp, surfaces, 0.05))
+    dense = mod._cluster_voxel(cp * 0.3, 0.03, {}, fast)
+    monkeypatch.setattr(mod, "_DENSE_MIN_CELLS", 0)
+    monkeypatch.setattr(mod, "_DENSE_CELLS_PER_POINT", 0)
+    np.testing.assert_array_equal(dense, mod._cluster_voxel(cp * 0.3, 0.03, {}, fast))
