@@ -214,7 +214,9 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
         first = order[starts]
         vkeys = np.stack([k[a][first] + origin[a] for a in range(3)], axis=1)
     # np.take gathers faster than fancy indexing; the gathers are the costliest step here.
-    local = [np.take(cols[a], order) - np.repeat(vkeys[:, a] * size[a], counts) for a in range(3)]
+    # Offsets from the voxel corner per point before the gather: the same products as
+    # vkeys * size (kcols holds each point's key as a float), without a repeat per axis.
+    local = [np.take(cols[a] - kcols[a] * size[a], order) for a in range(3)]
     sums = np.stack([np.add.reduceat(c, starts) for c in local], axis=1)
     outer = np.stack([np.add.reduceat(local[a] * local[b], starts) for a, b in OUTER_INDEX], axis=1)
     return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts, local)
