@@ -96,7 +96,10 @@ def test_height_gate_and_clusters():
 
 def test_polygon_cells_and_bad_input():
     sq = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
-    assert len(polygon_cells(sq, 0.02)) == 25
+    assert len(polygon_cells(sq, 0.02)) == 36  # 5 x 5 centres inside, the outline's cells
+    # A sliver (a box's side seen alone) covers the cells along it, not only its centroid's.
+    sliver = np.array([[0.0, 0.0], [0.3, 0.001], [0.3, 0.002]])
+    assert len(polygon_cells(sliver, 0.02)) >= 15
     assert len(polygon_cells(np.array([[0.001, 0.001]]), 0.02)) == 1
     with pytest.raises(InputError):
         OverlapTracker().update([_rect(0, 0, 2, 2)], [0.0, 1.0])

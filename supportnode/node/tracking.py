@@ -29,10 +29,19 @@ def pack_cells(cells: np.ndarray) -> np.ndarray:
     return np.unique(packed)
 
 
+def unpack_cells(packed: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`pack_cells`: (C,) int64 -> (C, 2) int64."""
+    p = np.ascontiguousarray(packed, dtype=np.int64).view(np.uint64)
+    hi = (p >> np.uint64(32)).astype(np.int64) - (1 << 31)
+    lo = (p & np.uint64(0xFFFFFFFF)).astype(np.int64) - (1 << 31)
+    return np.stack([hi, lo], axis=1)
+
+
 def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
     """Cells (C, 2) int64 of a grid of ``cell_size`` metres whose centres lie inside a convex
-    counter-clockwise (K, 2) polygon (e.g. ``Cluster.footprint``); at least the cell of its
-    centroid, so tiny objects still have a footprint. Sorted like ``np.unique(axis=0)``.
+    counter-clockwise (K, 2) polygon (e.g. ``Cluster.footprint``), plus the cells its outline
+    runs through and the cell of its centroid, so slivers and tiny objects still have a
+    footprint. Sorted like ``np.unique(axis=0)``.
 
     Column by column: in a counter-clockwise polygon the edges running towards +x bound the
     inside from below and those running towards -x from above, so each grid column's cells are
@@ -71,12 +80,19 @@ def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
     n = np.maximum(y_hi - y_lo + 1, 0)
     cx = np.repeat(cols, n)
     cy = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(y_lo, n)
-    cells = np.stack([cx, cy], axis=1)  # sorted by column, then row, and distinct
-    own = np.floor(poly.mean(axis=0) / cell_size).astype(np.int64)
-    if not ((cx == own[0]) & (cy == own[1])).any():
-        cells = np.concatenate([cells, own[None]])
-        cells = cells[np.lexsort((cells[:, 1], cells[:, 0]))]
-    return cells
+    # The cells along the outline too: the footprint of a flat vertical face (a box side seen
+    # alone) is a sliver with no cell centre inside, and one cell at its centroid would make
+    # its overlap with the same face in the next scan a matter of luck.
+    a = poly
+    d = np.roll(poly, -1, axis=0) - poly if len(poly) > 1 else np.zeros((1, 2))
+    steps = np.maximum(np.ceil(np.hypot(d[:, 0], d[:, 1]) / (0.5 * cell_size)), 1).astype(np.int64)
+    e = np.repeat(np.arange(len(a)), steps)
+    t = (np.arange(len(e)) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[e]
+    edge = np.floor((a[e] + t[:, None] * d[e]) / cell_size).astype(np.int64)
+    own = np.floor(poly.mean(axis=0) / cell_size).astype(np.int64)[None]
+    all_cells = np.concatenate([np.stack([cx, cy], axis=1), edge, own])
+    cells = unpack_cells(pack_cells(all_cells))
+    return cells[np.lexsort((cells[:, 1], cells[:, 0]))]
 
 
 def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
