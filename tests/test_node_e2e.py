@@ -142,6 +142,13 @@ def test_run_end_to_end(sim_scans):
         # one line per reject period (5 s), not one per bad message
         periods = 1 + int((time.monotonic() - started) / 5.0)
         assert 1 <= err.count("rejected a scan") <= periods + 1
+        # the closing summary counts from the socket at the end, not the last diagnostics
+        import re
+
+        m = re.search(r"stopped: (\d+) scans received, (\d+) processed.*?(\d+) detections", err)
+        assert m, err[-500:]
+        received, processed, detections = map(int, m.groups())
+        assert received >= processed >= detections > 0
         for s in (pub, sub, late):
             s.close()
     finally:

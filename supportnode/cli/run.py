@@ -33,12 +33,15 @@ def run(args: argparse.Namespace) -> int:
     # which spin turns into a normal return (exit code 0).
     with Node(params) as node:
         node.spin(duration=args.duration)
-        c = node.counters
+        c = node.diagnostics().counters  # refreshes the socket's received / dropped counts
         logging.getLogger("supportnode.node").info(
-            "stopped: %d scans received, %d processed, %d dropped, %d rejected",
+            "stopped: %d scans received, %d processed, %d dropped, %d rejected; "
+            "%d detections, %d skipped for a newer scan",
             c["scans_received"],
             c["scans_processed"],
             c["scans_dropped"],
             c["scans_rejected"],
+            c["detections"],
+            c["detections_skipped"],
         )
     return 0
