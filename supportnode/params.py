@@ -174,6 +174,18 @@ class ObjectParams:
     split_neck_width: float = param(
         0.04, "footprint necks narrower than this separate two objects", "m", min=0.0
     )
+    split_concave: bool = param(
+        False,
+        "split clusters that fall apart into parts standing side by side on the surface when "
+        "the voxels along concave creases are removed (touching convex objects)",
+    )
+    concave_tolerance: float = param(
+        0.1,
+        "a link between neighbouring voxels is concave when their normals converge by more "
+        "than this (normal difference along the centroid offset, per unit offset)",
+        min=0.0,
+        max=2.0,
+    )
 
 
 @dataclass(frozen=True)

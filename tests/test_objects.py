@@ -436,3 +436,47 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(mod, "_DENSE_MIN_CELLS", 0)
     monkeypatch.setattr(mod, "_DENSE_CELLS_PER_POINT", 0)
     np.testing.assert_array_equal(dense, mod._cluster_voxel(cp * 0.3, 0.03, {}, fast))
+
+
+def barrel_triangle(r: float = 0.06, step: float = 0.005) -> np.ndarray:
+    """Three touching vertical cylinders with centres on a triangle of side 2r, (P, 3)."""
+    centres = [(-r, 0.0), (r, 0.0), (0.0, r * np.sqrt(3.0))]
+    return np.concatenate([cylinder(x, y, r, 0.0, 0.18, step) for x, y in centres])
+
+
+def test_barrels_touching_in_a_triangle_split_at_concave_creases():
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    # Off by default: it needs dense sampling (here 8 mm; at 1 cm it finds no parts).
+    pts = barrel_triangle(step=0.008)
+    surf = SurfaceResult([floor], np.full(len(pts), -1, np.int32))
+    # The small gap in the middle fills on the footprint raster: no neck to cut.
+    off = detect_objects(pts, surf)
+    assert len(off.clusters) == 1
+    res = detect_objects(pts, surf, ObjectParams(split_concave=True))
+    assert res.stats["concave_splits"] == 1 and len(res.clusters) == 3
+    n = len(pts) // 3
+    truth = np.repeat(np.arange(3), n)
+    for k in range(3):  # each barrel is (mostly) one cluster of its own
+        assert np.bincount(res.labels[truth == k]).max() > 0.85 * n
+    assert len({int(np.bincount(res.labels[truth == k]).argmax()) for k in range(3)}) == 3
+
+
+def test_single_concave_objects_not_split_at_creases():
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    ell = np.concatenate(
+        [
+            box((0.0, 0.0, 0.0), (0.3, 0.1, 0.15), 0.005),
+            box((0.0, 0.0, 0.0), (0.1, 0.3, 0.15), 0.005),
+        ]
+    )
+    # A bowl: a hemispherical shell (inside and outside) with its rim up.
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 120), np.linspace(0.05, np.pi / 2, 40))
+    shell = [
+        np.stack([r * np.cos(u) * np.sin(v), r * np.sin(u) * np.sin(v), 0.1 - r * np.cos(v)], -1)
+        for r in (0.1, 0.095)
+    ]
+    bowl = np.concatenate([s.reshape(-1, 3) for s in shell])
+    on = ObjectParams(split_concave=True)
+    for obj, params in ((ell, ObjectParams()), (bowl, ObjectParams()), (bowl, on)):
+        r = detect_objects(obj, SurfaceResult([floor], np.full(len(obj), -1, np.int32)), params)
+        assert len(r.clusters) == 1 and r.stats["concave_splits"] == 0

@@ -30,6 +30,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from supportnode.errors import InputError
+from supportnode.geometry.linalg import sym3_eigen
 from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import ObjectParams
 
@@ -58,6 +59,14 @@ _STEP_RIM_FREE = 0.5
 _STEP_STAND = 0.02
 _STEP_MAX_EXTENT = 1.5
 _STEP_DENSE = 0.9
+# Splitting at concave creases (see _split_concave): voxels with at least _CONCAVE_MIN_POINTS
+# points have a normal; a part must hold _CONCAVE_PART_FRACTION of the cluster's points, span
+# _CONCAVE_PART_VOXELS voxels across in x and y, and reach within _STEP_STAND of the bottom.
+_CONCAVE_MIN_POINTS = 3
+_CONCAVE_PART_FRACTION = 0.1
+_CONCAVE_PART_VOXELS = 2.0
+# Only clusters at most this wide in x and y are tried (groups of objects, not room structure).
+_CONCAVE_MAX_EXTENT = 1.0
 # Recursion depth of splitting: up to 2**depth parts per cluster.
 _SPLIT_DEPTH = 3
 # A cluster stands on a surface when at least this fraction of its lowest points are over it.
@@ -160,6 +169,7 @@ def detect_objects(
     stats["merged_splits"] = 0  # clusters cut into parts at a thin footprint neck
     stats["split_parts"] = 0
     stats["step_splits"] = 0  # of which cut at a step of the top height
+    stats["concave_splits"] = 0  # of which cut along concave creases
     if params.split_touching and len(lab):
         lab = _split_touching(cp, lab, params, stats)
     t2 = time.perf_counter()
@@ -422,10 +432,20 @@ def _split_touching(
         parts = _split_recursive(xy_c, cell, radius, params.min_points, _SPLIT_DEPTH)
         n_parts = int(parts.max()) + 1
         if n_parts < 2 and (hi[c] - lo[c]).max() <= _STEP_MAX_EXTENT:
-            step = _split_step(np.take(cp, idx, axis=0), params.voxel_size, params.min_points)
+            p_c = np.take(cp, idx, axis=0)
+            step, dense = _split_step(p_c, params.voxel_size, params.min_points)
             if step is not None:
                 parts, n_parts = step, 2
                 stats["step_splits"] += 1
+            elif (
+                dense and params.split_concave and (hi[c] - lo[c]).max() <= _CONCAVE_MAX_EXTENT
+            ):  # not tried on sparse footprints (far scans) or wide structure
+                conc = _split_concave(
+                    p_c, params.voxel_size, params.concave_tolerance, params.min_points
+                )
+                if conc is not None:
+                    parts, n_parts = conc, int(conc.max()) + 1
+                    stats["concave_splits"] += 1
         if n_parts < 2:
             continue
         stats["merged_splits"] += 1
@@ -449,8 +469,9 @@ def _may_split(shape: np.ndarray, cell: float, radius: float) -> np.ndarray:
     return (narrow >= 5) & (deepest * cell >= 1.5 * radius)
 
 
-def _split_step(p: np.ndarray, cell: float, min_points: int) -> np.ndarray | None:
-    """(P,) part 0 or 1 per point of p (P, 3) when its top is two flat levels, else None.
+def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray | None, bool]:
+    """(P,) part 0 or 1 per point of p (P, 3) when its top is two flat levels, else None; and
+    whether the cluster's footprint is dense enough to be tried (see below).
 
     Boxes of different heights standing face to face have one rectangular footprint, no neck;
     only the top height steps. On a raster of cell (the voxel size), cells whose top heights
@@ -471,14 +492,14 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> np.ndarray | Non
     np.maximum.at(top, key, p[:, 2])  # top height of every cell, -inf when empty
     cells = np.flatnonzero(np.isfinite(top))
     if len(cells) < 2:
-        return None
+        return None, False
     grid = top.reshape(h, w)
     # Sparse sampling (a distant scan) leaves empty cells inside the footprint, where neither
     # the levels nor the free space around them can be judged: such clusters are not tried.
     occupied = np.pad(np.isfinite(grid), 1)
     solid = _fill_holes(ndimage.binary_closing(occupied, np.ones((3, 3), dtype=bool)))
     if len(cells) < _STEP_DENSE * solid.sum():
-        return None
+        return None, False
     vid = np.full((h, w), -1, dtype=np.int64)
     vid.flat[cells] = np.arange(len(cells))
     rows, cols = [], []
@@ -495,12 +516,12 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> np.ndarray | Non
     size = np.bincount(plateau)
     big = np.flatnonzero(size >= _STEP_PART_FRACTION * len(cells))
     if len(big) != 2 or size[big].sum() < _STEP_COVER * len(cells):
-        return None
+        return None, True
     tops = [top[cells[plateau == k]] for k in big]
     if abs(float(np.median(tops[0]) - np.median(tops[1]))) < _STEP_MIN:
-        return None
+        return None, True
     if max(float(t.std()) for t in tops) > _STEP_FLAT:
-        return None
+        return None, True
     # Each level must stand beside the other, not on it: most of its rim borders free space
     # (a box beside a box: three of four sides; a stacked box: none).
     # Within two cells: a box's edge cells hold its sides' points, lower than its top.
@@ -511,7 +532,7 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> np.ndarray | Non
         mine = mine.reshape(h, w)
         rim = mine & ~ndimage.binary_erosion(mine, np.ones((3, 3), dtype=bool), border_value=0)
         if (rim & near_free).sum() < _STEP_RIM_FREE * rim.sum():
-            return None
+            return None, True
     # Points go by a raster three times finer, whose cells take the plateau their top height
     # matches (the coarse cells at the step hold both levels), else the nearest such cell.
     level = np.array([np.median(t) for t in tops])
@@ -524,17 +545,106 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> np.ndarray | Non
     mark = np.where(gap.min(axis=1) <= _STEP_LINK, np.argmin(gap, axis=1) + 1, 0)
     mark = mark.reshape(fh, fw)
     if not mark.any():
-        return None
+        return None, True
     _, (ni, nj) = ndimage.distance_transform_edt(mark == 0, return_indices=True)
     part = mark[ni, nj].ravel()[fkey] - 1
     counts = np.bincount(part, minlength=2)
     if counts.min() < min_points:
-        return None
+        return None, True
     bottom = np.percentile(p[:, 2], 1.0)
     for n in range(2):
         if np.percentile(p[part == n, 2], 2.0) - bottom > _STEP_STAND:
-            return None  # one level stands on the other, not on the surface
-    return part if counts[0] >= counts[1] else 1 - part  # part 0 the larger
+            return None, True  # one level stands on the other, not on the surface
+    return (part if counts[0] >= counts[1] else 1 - part), True  # part 0 the larger
+
+
+def _split_concave(p: np.ndarray, voxel: float, tol: float, min_points: int) -> np.ndarray | None:
+    """(P,) part index per point of p (P, 3) when it falls apart at concave creases, else None.
+
+    Touching convex objects (barrels in a triangle, whose footprint has no neck once its small
+    inner gap is filled) meet along a concave crease, as in LCCP (Stein et al. 2014). Each
+    voxel of edge ``voxel`` with _CONCAVE_MIN_POINTS points has a normal (smallest eigenvector
+    of its points' scatter), oriented away from the cluster's centroid (outward for a convex
+    part that contains it). A link between 26-neighbours i, j is concave when
+    ``(n_i - n_j) . (c_i - c_j) < -tol * |c_i - c_j|`` (c: voxel centroids; >= 0 on a convex
+    surface). The voxels of concave links are removed; the remaining connected components are
+    parts when they hold _CONCAVE_PART_FRACTION of the points (and min_points), span
+    _CONCAVE_PART_VOXELS voxels in x and y, and stand within _STEP_STAND of the cluster's
+    bottom: side by side on the surface, as for _split_step, so a lamp's shade, a toy car's
+    cabin, a stacked box or a chair's back stays with what it stands on. Every point then
+    goes to the part with the nearest point in x, y (columns are never cut). Parts by size.
+    """
+    if len(p) < 2 * max(min_points, 1):
+        return None
+    q = p - _col(np.add, p) / len(p)  # centred: moments without cancellation; centroid 0
+    ijk = [np.floor((c - c.min()) / voxel).astype(np.int64) + 1 for c in q.T]
+    dims = np.array([c.max() + 2 for c in ijk], dtype=np.int64)
+    strides = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
+    keys = ijk[0] * strides[0] + ijk[1] * strides[1] + ijk[2]
+    vkeys, inv = np.unique(keys, return_inverse=True)
+    inv = inv.ravel()
+    nv = len(vkeys)
+    if nv < 3:
+        return None
+    cnt = np.bincount(inv, minlength=nv).astype(np.float64)
+    cen = np.stack([np.bincount(inv, q[:, a], nv) for a in range(3)], axis=1) / cnt[:, None]
+    cov = np.empty((nv, 3, 3))
+    for a in range(3):  # six second moments, not a loop over voxels
+        for b in range(a, 3):
+            m = np.bincount(inv, q[:, a] * q[:, b], nv) / cnt - cen[:, a] * cen[:, b]
+            cov[:, a, b] = cov[:, b, a] = m
+    _, normal = sym3_eigen(cov)
+    flip = (normal * cen).sum(axis=1) < 0  # outward: away from the centroid (the origin)
+    normal[flip] *= -1.0
+    good = cnt >= _CONCAVE_MIN_POINTS
+    rows, cols = [], []
+    for off in _FORWARD @ strides:  # 13 vectorised look-ups, not a loop over voxels
+        pos = np.minimum(np.searchsorted(vkeys, vkeys + off), nv - 1)
+        hit = np.flatnonzero(vkeys[pos] == vkeys + off)
+        rows.append(hit)
+        cols.append(pos[hit])
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    dc = cen[r] - cen[c]
+    conv = ((normal[r] - normal[c]) * dc).sum(axis=1)
+    concave = good[r] & good[c] & (conv < -tol * np.sqrt((dc * dc).sum(axis=1)))
+    if not concave.any():
+        return None
+    crease = np.zeros(nv, dtype=bool)
+    crease[r[concave]] = True
+    crease[c[concave]] = True
+    keep = ~crease[r] & ~crease[c]
+    graph = coo_matrix((np.ones(int(keep.sum()), dtype=np.int8), (r[keep], c[keep])), (nv, nv))
+    _, comp = connected_components(graph.tocsr(), directed=False)
+    comp[crease] = -1
+    pcomp = comp[inv]
+    ok = pcomp >= 0
+    n_comp = int(comp.max()) + 1
+    size = np.bincount(pcomp[ok], minlength=n_comp)
+    cand = np.flatnonzero(size >= max(min_points, _CONCAVE_PART_FRACTION * len(p)))
+    if len(cand) < 2:
+        return None
+    bottom = np.percentile(q[:, 2], 1.0)
+    parts = []
+    for k in cand:  # a few large components
+        sel = np.flatnonzero(pcomp == k)
+        ext = _col(np.maximum, q[sel, :2]) - _col(np.minimum, q[sel, :2])
+        if ext.min() < _CONCAVE_PART_VOXELS * voxel:
+            continue
+        if np.percentile(q[sel, 2], 2.0) - bottom > _STEP_STAND:
+            continue  # stands on another part, not on the surface
+        parts.append(sel)
+    if len(parts) < 2:
+        return None
+    seed = np.concatenate(parts)
+    seed_part = np.repeat(np.arange(len(parts)), [len(s) for s in parts])
+    _, near = cKDTree(q[seed, :2]).query(q[:, :2], k=1)
+    part = seed_part[near]
+    counts = np.bincount(part, minlength=len(parts))
+    if counts.min() < min_points:
+        return None
+    rank = np.empty(len(counts), dtype=np.int64)
+    rank[np.argsort(-counts, kind="stable")] = np.arange(len(counts))
+    return rank[part]
 
 
 def _split_recursive(
