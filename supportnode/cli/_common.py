@@ -22,17 +22,26 @@ def add_config_arguments(parser: argparse.ArgumentParser, example: str) -> None:
     )
 
 
-def positive_seconds(text: str) -> float:
-    """argparse type: a finite number of seconds > 0."""
+def _positive(text: str, what: str) -> float:
     import math
 
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text}") from None
+        raise argparse.ArgumentTypeError(f"expected a {what}, got {text}") from None
     if not value > 0 or not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
+        raise argparse.ArgumentTypeError(f"must be a positive {what}, got {text}")
     return value
+
+
+def positive_seconds(text: str) -> float:
+    """argparse type: a finite number of seconds > 0."""
+    return _positive(text, "number of seconds")
+
+
+def positive_number(text: str) -> float:
+    """argparse type: a finite number > 0 (a rate factor, a scale)."""
+    return _positive(text, "number")
 
 
 def int_at_least(low: int):

@@ -200,6 +200,19 @@ def _packed(
 # ------------------------------------------------------------------------------------ scans
 
 
+def _point_cloud(stamp: float, frame_id: str, columns: list) -> FoxPointCloud:
+    """A Foxglove PointCloud at the frame's origin from (name, (N,) array) columns."""
+    fields, stride, data = _packed(columns)
+    return FoxPointCloud(
+        timestamp=timestamp(stamp),
+        frame_id=frame_id,
+        pose=_pose((0.0, 0.0, 0.0)),
+        point_stride=stride,
+        fields=fields,
+        data=data,
+    )
+
+
 def scan_pointcloud(cloud: PointCloud) -> FoxPointCloud:
     """The scan as a Foxglove PointCloud in its own frame: x, y, z as float32 at offsets 0, 4, 8,
     then the cloud's other 1-D numeric fields (intensity, ring, time, ...) in wire order, so
@@ -209,15 +222,7 @@ def scan_pointcloud(cloud: PointCloud) -> FoxPointCloud:
         a = np.asarray(a)
         if name not in ("x", "y", "z") and a.ndim == 1 and a.dtype.kind in "uif":
             columns.append((name, a))
-    fields, stride, data = _packed(columns)
-    return FoxPointCloud(
-        timestamp=timestamp(cloud.stamp),
-        frame_id=cloud.frame_id,
-        pose=_pose((0.0, 0.0, 0.0)),
-        point_stride=stride,
-        fields=fields,
-        data=data,
-    )
+    return _point_cloud(cloud.stamp, cloud.frame_id, columns)
 
 
 def scan_transform(cloud: PointCloud, map_frame: str) -> FrameTransform | None:
@@ -338,15 +343,7 @@ def cluster_points(msg: ObstacleClusters) -> FoxPointCloud | None:
     pts = np.concatenate([np.asarray(c.points, dtype=np.float32) for c in parts])
     ids = np.repeat(np.array([c.id for c in parts], dtype=np.int32), [len(c.points) for c in parts])
     columns = [("x", pts[:, 0]), ("y", pts[:, 1]), ("z", pts[:, 2]), ("cluster", ids)]
-    fields, stride, data = _packed(columns)
-    return FoxPointCloud(
-        timestamp=timestamp(msg.stamp),
-        frame_id=msg.frame_id,
-        pose=_pose((0.0, 0.0, 0.0)),
-        point_stride=stride,
-        fields=fields,
-        data=data,
-    )
+    return _point_cloud(msg.stamp, msg.frame_id, columns)
 
 
 # ------------------------------------------------------------------------------ diagnostics
