@@ -518,7 +518,7 @@ def _absorb_clutter(
     for _ in range(steps):  # a few rings of voxels, each step vectorised
         src, dst = [], []
         for off in offsets:
-            j = index.find(grid.keys[frontier] + off)
+            j = index.neighbours(frontier, off, grid.keys)
             ok = j >= 0
             src.append(frontier[ok])
             dst.append(j[ok])
@@ -641,7 +641,7 @@ def _reject_tilted_clutter(
     around = [vetted]
     beside = [(dx, dy, 0) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
     for off in np.array([*beside, (0, 0, 1), (0, 0, -1)], dtype=np.int64):
-        j = index.find(grid.keys[vetted] + off)
+        j = index.neighbours(vetted, off, grid.keys)
         around.append(j[j >= 0])
     vox = np.unique(np.concatenate(around))
     n_pts = grid.counts[vox]

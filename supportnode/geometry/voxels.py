@@ -55,6 +55,7 @@ class KeyIndex:
     order: np.ndarray  # (M,) int64: voxel index of each sorted entry
     # (prod(dims),) int32 voxel index by linear key, -1 where empty; None for a sparse extent
     table: np.ndarray | None = None
+    lin_of: np.ndarray | None = None  # (M,) int64 linear key of each voxel, in input order
 
     @classmethod
     def build(cls, keys: np.ndarray) -> KeyIndex:
@@ -74,7 +75,7 @@ class KeyIndex:
             # A dense extent (a room at 0.1 m is ~1e5 cells): direct lookup, no binary search.
             table = np.full(int(cells), -1, dtype=np.int32)
             table[lin[order[::-1]]] = order[::-1]  # duplicate keys: the first voxel wins
-        return cls(origin, dims, lin[order], order, table)
+        return cls(origin, dims, lin[order], order, table, lin)
 
     @staticmethod
     def _linear(keys: np.ndarray, origin: np.ndarray, dims: np.ndarray) -> np.ndarray:
@@ -95,6 +96,18 @@ class KeyIndex:
         hit = inside & (self.sorted_lin[pos] == lin)
         return np.where(hit, self.order[pos], -1)
 
+    def neighbours(self, voxels: np.ndarray, offset: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        """Index of the voxel at ``keys[voxels] + offset`` for (Q,) indexed voxels, -1 where
+        absent. keys: the (M, 3) keys given to ``build``.
+
+        With a dense table and |offset| <= 1 on every axis: one add and one gather (the
+        one-voxel padding keeps every such neighbour inside the table); else `find`."""
+        off = np.asarray(offset, dtype=np.int64)
+        if self.table is not None and self.lin_of is not None and np.abs(off).max() <= 1:
+            step = (off[0] * self.dims[1] + off[1]) * self.dims[2] + off[2]
+            return self.table[self.lin_of[voxels] + step].astype(np.int64)
+        return self.find(keys[voxels] + off)
+
     def neighbour_pairs(
         self, keys: np.ndarray, offsets: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -104,8 +117,9 @@ class KeyIndex:
         offsets: (K, 3) int64. Returns two (E,) int64 arrays.
         """
         src, dst = [], []
+        every = np.arange(len(keys))
         for off in np.asarray(offsets, dtype=np.int64):  # loop over <= 13 offsets, not voxels
-            j = self.find(keys + off)
+            j = self.neighbours(every, off, keys)
             ok = np.flatnonzero(j >= 0)
             src.append(ok)
             dst.append(j[ok])
