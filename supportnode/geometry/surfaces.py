@@ -540,27 +540,31 @@ def _absorb_clutter(
         # The plane's point relative to the candidate voxel's corner, then per point.
         rel = planes.mean[src] - grid.keys[dst] * grid.size
         nrm = planes.normal[src]
-        offset = np.stack(
-            [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)], axis=1
-        )
+        # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
+        off = [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)]
         dist = np.abs(
-            offset[:, 0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
-            + offset[:, 1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
-            + offset[:, 2]
+            off[0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
+            + off[1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
+            + off[2]
         )
         inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
         n_in = np.add.reduceat(inlier.astype(np.int64), first)
-        xy = offset[:, :2]
-        lo = np.minimum.reduceat(np.where(inlier[:, None], xy, np.inf), first, axis=0)
-        hi = np.maximum.reduceat(np.where(inlier[:, None], xy, -np.inf), first, axis=0)
+        lo = np.stack(
+            [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first) for a in range(2)],
+            axis=1,
+        )
+        hi = np.stack(
+            [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first) for a in range(2)],
+            axis=1,
+        )
         # The inliers must themselves be a level patch: a ramp crosses a level plane in a
         # band that would otherwise pass, voxel after voxel along its contour.
         w = inlier.astype(np.float64)
         cnt = np.maximum(n_in, 1)[:, None]
-        mean_in = np.add.reduceat(offset * w[:, None], first, axis=0) / cnt
+        mean_in = np.stack([np.add.reduceat(off[a] * w, first) for a in range(3)], axis=1) / cnt
         second = (
             np.stack(
-                [np.add.reduceat(offset[:, a] * offset[:, b] * w, first) for a, b in OUTER_INDEX],
+                [np.add.reduceat(off[a] * off[b] * w, first) for a, b in OUTER_INDEX],
                 axis=1,
             )
             / cnt
