@@ -714,10 +714,13 @@ def _label_points_planar(
             lz[pos]
             - (np.repeat(a, cnt) + np.repeat(bx, cnt) * lx[pos] + np.repeat(by, cnt) * ly[pos])
         )
-        surf = np.repeat(surface_of_voxel[t], cnt)
-        better = (dist <= tol_by_comp[surf]) & (dist < best[pos])
-        sorted_labels[pos[better]] = surf[better]
-        best[pos[better]] = dist[better]
+        # Per voxel, then repeated: the tolerance of each voxel's surface, not a gather per point.
+        surf_v = surface_of_voxel[t]
+        better = (dist <= np.repeat(tol_by_comp[surf_v], cnt)) & (dist < best[pos])
+        idx = np.flatnonzero(better)
+        at = pos[idx]
+        sorted_labels[at] = np.repeat(surf_v, cnt)[idx]
+        best[at] = dist[idx]
     return sorted_labels
 
 
