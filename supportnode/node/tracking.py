@@ -19,26 +19,38 @@ from scipy.optimize import linear_sum_assignment
 
 from supportnode.errors import InputError
 
+# Cell coordinates are packed around an offset of 2^30 (|ix|, |iy| < 2^30 cells: 21,000 km
+# at 2 cm) into 31 + 32 bits, so packed keys sort like (ix, iy) and never overflow int64.
+_CELL_OFFSET = 1 << 30
+
+
+def _pack(ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
+    return ((ix + _CELL_OFFSET) << 32) | (iy + _CELL_OFFSET)
+
 
 def pack_cells(cells: np.ndarray) -> np.ndarray:
-    """(C, 2) int cells (ix, iy) -> (C,) sorted unique int64 (32 bits each)."""
+    """(C, 2) int cells (ix, iy) -> (C,) sorted unique int64, in (ix, iy) order."""
     c = np.asarray(cells, dtype=np.int64).reshape(-1, 2)
-    packed = ((c[:, 0] + (1 << 31)) << 32) | ((c[:, 1] + (1 << 31)) & 0xFFFFFFFF)
+    packed = _pack(c[:, 0], c[:, 1])
     if len(packed) > 1 and (packed[1:] > packed[:-1]).all():
-        return packed  # already sorted and distinct (polygon_cells' output): skip the sort
+        return packed  # already sorted and distinct: skip the sort
     return np.unique(packed)
 
 
 def unpack_cells(packed: np.ndarray) -> np.ndarray:
     """Inverse of :func:`pack_cells`: (C,) int64 -> (C, 2) int64."""
-    p = np.ascontiguousarray(packed, dtype=np.int64).view(np.uint64)
-    hi = (p >> np.uint64(32)).astype(np.int64) - (1 << 31)
-    lo = (p & np.uint64(0xFFFFFFFF)).astype(np.int64) - (1 << 31)
-    return np.stack([hi, lo], axis=1)
+    p = np.asarray(packed, dtype=np.int64)
+    return np.stack([(p >> 32) - _CELL_OFFSET, (p & 0xFFFFFFFF) - _CELL_OFFSET], axis=1)
 
 
 def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
-    """Cells (C, 2) int64 of a grid of ``cell_size`` metres whose centres lie inside a convex
+    """:func:`polygon_cells_packed` as (C, 2) int64 cells, sorted like ``np.unique(axis=0)``."""
+    return unpack_cells(polygon_cells_packed(polygon, cell_size))
+
+
+def polygon_cells_packed(polygon: np.ndarray, cell_size: float) -> np.ndarray:
+    """Packed cells (C,) (:func:`pack_cells`) of a grid of ``cell_size`` metres whose centres
+    lie inside a convex
     counter-clockwise (K, 2) polygon (e.g. ``Cluster.footprint``), plus the cells its outline
     runs through and the cell of its centroid, so slivers and tiny objects still have a
     footprint. Sorted like ``np.unique(axis=0)``.
@@ -50,7 +62,7 @@ def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
     """
     poly = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
     if len(poly) == 0:
-        return np.zeros((0, 2), np.int64)
+        return np.zeros(0, np.int64)
     lo = np.floor(poly.min(axis=0) / cell_size).astype(np.int64)
     hi = np.floor(poly.max(axis=0) / cell_size).astype(np.int64)
     cols = np.arange(lo[0], hi[0] + 1)
@@ -90,9 +102,14 @@ def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
     t = (np.arange(len(e)) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[e]
     edge = np.floor((a[e] + t[:, None] * d[e]) / cell_size).astype(np.int64)
     own = np.floor(poly.mean(axis=0) / cell_size).astype(np.int64)[None]
-    all_cells = np.concatenate([np.stack([cx, cy], axis=1), edge, own])
-    cells = unpack_cells(pack_cells(all_cells))
-    return cells[np.lexsort((cells[:, 1], cells[:, 0]))]
+    inside = _pack(cx, cy)  # column by column, row by row: sorted and distinct
+    extra = pack_cells(np.concatenate([edge, own]))  # a few hundred cells
+    if len(inside) == 0:
+        return extra
+    # Merge the outline's cells into the sorted inside ones without sorting them all again.
+    pos = np.searchsorted(inside, extra)
+    known = (pos < len(inside)) & (inside[np.minimum(pos, len(inside) - 1)] == extra)
+    return np.insert(inside, pos[~known], extra[~known])
 
 
 def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
@@ -196,7 +213,13 @@ class OverlapTracker:
             raise InputError(f"{len(cells)} footprints but {len(heights)} heights")
         d = len(cells)
         grp = np.full(d, -1, np.int64) if groups is None else np.asarray(groups, np.int64)
-        packed = [pack_cells(c) for c in cells]
+        return self._update_packed([pack_cells(c) for c in cells], heights, grp)
+
+    def _update_packed(
+        self, packed: list[np.ndarray], heights: np.ndarray, grp: np.ndarray
+    ) -> TrackUpdate:
+        """`update` with footprints already packed (sorted unique (C,) int64 each)."""
+        d = len(packed)
         tracks = self._tracks
         iou = overlap_matrix(packed, [t.cells for t in tracks])
         t_height = np.array([t.height for t in tracks])
@@ -260,6 +283,13 @@ class ClusterTracker(OverlapTracker):
 
     def update_clusters(self, clusters: list, surface_ids: np.ndarray | None = None) -> TrackUpdate:
         """clusters: list of Cluster; surface_ids: (D,) stable surface id under each (-1 none)."""
-        cells = [polygon_cells(c.footprint, self.cell_size) for c in clusters]
+        packed = [polygon_cells_packed(c.footprint, self.cell_size) for c in clusters]
         bottoms = np.array([float(c.bbox_min[2]) for c in clusters])
-        return self.update(cells, bottoms, surface_ids)
+        grp = (
+            np.full(len(clusters), -1, np.int64)
+            if surface_ids is None
+            else np.asarray(surface_ids, np.int64).reshape(-1)
+        )
+        if len(grp) != len(clusters):
+            raise InputError(f"{len(clusters)} clusters but {len(grp)} surface ids")
+        return self._update_packed(packed, bottoms, grp)
