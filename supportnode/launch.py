@@ -324,11 +324,17 @@ class Launcher:
         self._events: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()
         self._running: dict[str, _Running] = {}
         self._write_lock = threading.Lock()
+        self._output_gone = False
 
     # Thread- and signal-safe: SimpleQueue.put may be called from a signal handler.
     def stop(self) -> None:
         """Ask `run` to stop every process and return 0."""
         self._events.put(("stop", None))
+
+    @property
+    def output_gone(self) -> bool:
+        """True once writing the output failed because its reader went away."""
+        return self._output_gone
 
     def log(self, message: str) -> None:
         """One ``[launch]`` line on the error stream."""
@@ -336,8 +342,17 @@ class Launcher:
 
     def _write(self, stream: TextIO, text: str) -> None:
         with self._write_lock:
-            stream.write(text)
-            stream.flush()
+            if self._output_gone:
+                return
+            try:
+                stream.write(text)
+                stream.flush()
+            except (BrokenPipeError, ValueError):
+                # Whoever read the output is gone (`supportnode launch ... | head`, a closed
+                # terminal): stop everything, as the reader's end of a pipe means, instead of
+                # dying in the middle and leaving the children (own sessions) running.
+                self._output_gone = True
+                self._events.put(("stop", None))
 
     def run(self) -> int:
         """Start the processes and supervise them; returns the exit code for the launcher.

@@ -40,6 +40,11 @@ time.sleep(60)
 """
 
 
+TICK = """for i in range(600):
+    print(name, "tick", i, flush=True)
+    time.sleep(0.1)"""
+
+
 def write(path: Path, text: str) -> Path:
     path.write_text(textwrap.dedent(text))
     return path
@@ -298,6 +303,23 @@ def test_duration_stops_everything_and_exits_0(tmp_path):
     proc = start_cli(tmp_path, "--duration", "1.5")
     _, err = proc.communicate(timeout=20)
     assert proc.returncode == 0, err
+    assert (tmp_path / "stopped.txt").read_text() == "a\n"
+
+
+def test_reader_gone_stops_the_children(tmp_path):
+    """`supportnode launch ... | head -1`: when the output's reader goes away, the launcher
+    stops its children (they run in their own sessions) and exits, not dies and orphans them."""
+    # A child that keeps talking, like the node: the launcher notices at its next line.
+    write(tmp_path / "child.py", CHILD.replace("time.sleep(60)", TICK))
+    write(tmp_path / "l.yaml", "- name: a\n  command: python child.py a .\n")
+    proc = start_cli(tmp_path)
+    wait_for([tmp_path / "started_a"], proc)
+    proc.stdout.close()  # the reader of both streams goes away
+    proc.stderr.close()
+    proc.wait(timeout=20)
+    deadline = time.monotonic() + 10
+    while not (tmp_path / "stopped.txt").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert (tmp_path / "stopped.txt").read_text() == "a\n"
 
 

@@ -56,4 +56,12 @@ def run(args: argparse.Namespace) -> int:
         timer = threading.Timer(args.duration, launcher.stop)  # stop() is thread-safe
         timer.daemon = True
         timer.start()
-    return launcher.run()
+    code = launcher.run()
+    if launcher.output_gone:
+        import os
+
+        # Python flushes stdout and stderr at exit; into a closed pipe that prints an error.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+    return code
