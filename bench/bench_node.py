@@ -1,7 +1,8 @@
 """Node benchmarks: stage latency, end-to-end latency over sockets, cost as the map grows,
 drops and memory at twice the input rate, accuracy and id switches on simulated sequences.
 
-    python bench/bench_node.py [--scene kitchen] [--frames 30] [--only stages,e2e,growth,rate,ids]
+    python bench/bench_node.py [--scene kitchen] [--frames 30] [--lidar os128|vlp16]
+                               [--only stages,e2e,growth,rate,ids]
 
 Prints one JSON object per part. The lidar is the simulator's os128 (128 x 1024 = 131,072
 rays; a scan holds as many points as rays hit something).
@@ -248,11 +249,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="kitchen_closed")
     ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--lidar", default="os128", help="simulated lidar preset (os128, vlp16)")
     ap.add_argument("--only", default="stages,e2e,growth,rate,ids")
     args = ap.parse_args()
     parts = set(args.only.split(","))
     scene = scene_by_name(args.scene)
-    sc = scans(scene, Lidar.preset("os128"), poses_for(scene, args.frames), seed=0, frame="sensor")
+    lidar = Lidar.preset(args.lidar)
+    sc = scans(scene, lidar, poses_for(scene, args.frames), seed=0, frame="sensor")
     if "stages" in parts:
         print(json.dumps({"stages": stages(sc)}), flush=True)
     if "e2e" in parts:
