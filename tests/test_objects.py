@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -480,3 +481,27 @@ def test_single_concave_objects_not_split_at_creases():
     for obj, params in ((ell, ObjectParams()), (bowl, ObjectParams()), (bowl, on)):
         r = detect_objects(obj, SurfaceResult([floor], np.full(len(obj), -1, np.int32)), params)
         assert len(r.clusters) == 1 and r.stats["concave_splits"] == 0
+
+
+def test_walls_around_two_rooms_are_not_cut_at_the_doorway(rng):
+    """The walls of two 2 x 2 m rooms joined by a 0.8 m passage: one cluster. The rooms they
+    enclose are no hole in an object's footprint; filled, they would make a dumbbell that the
+    neck split cuts at the passage."""
+    floor = np.c_[
+        rng.uniform(-0.5, 5.5, 120_000), rng.uniform(-0.5, 2.5, 120_000), np.zeros(120_000)
+    ]
+    # outline of the dumbbell: room A [0,2]x[0,2], passage [2,3]x[0.6,1.4], room B [3,5]x[0,2]
+    corners = np.array(
+        [[0, 0], [2, 0], [2, 0.6], [3, 0.6], [3, 0], [5, 0], [5, 2], [3, 2], [3, 1.4],
+         [2, 1.4], [2, 2], [0, 2], [0, 0]], dtype=float
+    )  # fmt: skip
+    walls = []
+    for a, b in itertools.pairwise(corners):
+        n = int(np.hypot(*(b - a)) * 3000)
+        t = rng.uniform(0, 1, n)
+        walls.append(np.c_[a + t[:, None] * (b - a), rng.uniform(0.02, 0.5, n)])
+    pts = np.vstack([floor, *walls])
+    res = detect_objects(pts, detect_surfaces(pts), ObjectParams(min_points=30))
+    wall_labels = res.labels[len(floor) :]
+    big = np.bincount(wall_labels[wall_labels >= 0]).argmax()
+    assert (wall_labels == big).mean() > 0.98

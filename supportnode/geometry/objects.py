@@ -42,6 +42,9 @@ _BOTTOM_BAND = 0.02
 _SPLIT_MIN_FRACTION = 0.15
 # A neck this much shallower than both parts it joins is cut (see _split_footprint).
 _SPLIT_NECK_RATIO = 0.6
+# Holes up to this area (m^2) are filled before the neck split (a side-scanned barrel is a
+# ring); the room that a cluster of walls encloses is not a hole in one object's footprint.
+_SPLIT_MAX_HOLE = 1.0
 # Footprint raster cell = voxel_size / this (1 cm at the default 3 cm voxels).
 _SPLIT_CELL_DIVISOR = 3.0
 # Splitting at a step of the top height (see _split_step), metres and fractions: raster cell
@@ -698,7 +701,7 @@ def _split_footprint(
         mode="constant",
         cval=0,
     )
-    occ = _fill_holes((occ | closed).astype(bool))
+    occ = _fill_holes((occ | closed).astype(bool), max_cells=int(_SPLIT_MAX_HOLE / cell**2))
     # The taxicab distance to the edge bounds the Euclidean one from above and costs a tenth:
     # a footprint with no cell deep enough for a part (a ring of walls) stops here.
     if (float(ndimage.distance_transform_cdt(occ, metric="taxicab").max()) - 0.5) * cell < (
@@ -829,8 +832,9 @@ def _col(ufunc: np.ufunc, a: np.ndarray) -> np.ndarray:
     return np.array([ufunc.reduce(a[:, j]) for j in range(a.shape[1])])
 
 
-def _fill_holes(mask: np.ndarray) -> np.ndarray:
-    """``ndimage.binary_fill_holes(mask)`` for a 2-D mask, by one labelling of the background.
+def _fill_holes(mask: np.ndarray, max_cells: int | None = None) -> np.ndarray:
+    """``ndimage.binary_fill_holes(mask)`` for a 2-D mask, by one labelling of the background;
+    with ``max_cells``, only holes of at most that many cells are filled.
 
     Holes are the 4-connected background components that do not touch the array's edge, as in
     binary_fill_holes, whose iterated dilation from the edge is 3-4x slower on big rasters.
@@ -839,6 +843,8 @@ def _fill_holes(mask: np.ndarray) -> np.ndarray:
     outside = np.zeros(n + 1, dtype=bool)
     for edge in (lab[0], lab[-1], lab[:, 0], lab[:, -1]):  # the four edges of the raster
         outside[edge] = True
+    if max_cells is not None:
+        outside |= np.bincount(lab.ravel(), minlength=n + 1) > max_cells
     outside[0] = False  # label 0 is the mask itself
     return ~outside[lab]
 
