@@ -21,13 +21,15 @@ Pure: numpy in, numpy out; no sockets, files or printing.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
+from typing import NamedTuple
 
 import numpy as np
 
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
 from supportnode.geometry.transform import transform_points
-from supportnode.geometry.voxels import OUTER_INDEX, VoxelGrid, voxelize
+from supportnode.geometry.voxels import OUTER_INDEX, argsort_keys, voxelize
 from supportnode.params import MapParams
 
 # Keys are packed into one non-negative int64: 22 bits for x and y, 19 for z, each around an
@@ -37,7 +39,9 @@ _OFFS = np.array([1 << (_BITS_XY - 1), 1 << (_BITS_XY - 1), 1 << (_BITS_Z - 1)],
 _SHIFTS = (_BITS_XY + _BITS_Z, _BITS_Z, 0)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: scatters spatially close keys
 _EMPTY, _TOMB = -1, -2
+_FILTER_BITS = 3  # KeyHash.filter has 2^3 cells per table position
 REPRESENTATIONS = ("recent", "centroid")
+_CHUNK = 1 << 15  # ray samples per chunk in VoxelMap._clear (~256 KB per temporary)
 
 
 def pack_keys(keys: np.ndarray) -> np.ndarray:
@@ -64,6 +68,12 @@ class KeyHash:
     Every operation is vectorised over its queries; the Python loop runs once per probe step
     (a handful at load <= 1/2). Deleted entries become tombstones; the table is rebuilt (O(size),
     amortised over at least as many insertions) when entries plus tombstones pass half of it.
+
+    Alongside, ``filter`` counts the live keys per cell of a finer hash (2^_FILTER_BITS cells
+    per table position, uint8, saturating at 255: a saturated cell stays "maybe" until the next
+    rebuild). A zero cell proves a key absent: at 1/16 or less of the cells occupied it drops
+    most absent queries with one lookup, where the table itself leaves up to half of them to
+    probe on (:meth:`maybe_present`).
     """
 
     def __init__(self, capacity: int = 1 << 12) -> None:
@@ -75,16 +85,24 @@ class KeyHash:
         self.vals = np.zeros(capacity, dtype=np.int64)
         self.tombs = 0
         self._shift = np.uint64(64 - int(np.log2(capacity)))
+        self.filter = np.zeros(capacity << _FILTER_BITS, dtype=np.uint8)
+        self._fshift = np.uint64(64 - int(np.log2(capacity)) - _FILTER_BITS)
 
     @property
     def capacity(self) -> int:
         return len(self.keys)
 
-    def _home(self, q: np.ndarray) -> np.ndarray:
+    def _home(self, q: np.ndarray, shift: np.uint64 | None = None) -> np.ndarray:
         # Views, not copies: packed keys are non-negative and the shifted hash fits in int64.
         h = np.ascontiguousarray(q, dtype=np.int64).view(np.uint64) * _GOLDEN
-        h >>= self._shift
+        h >>= self._shift if shift is None else shift
         return h.view(np.int64)
+
+    def _count(self, q: np.ndarray, sign: int) -> None:
+        """Add ``sign`` (+-1) to the filter cells of (Q,) distinct packed keys."""
+        cells, n = np.unique(self._home(q, self._fshift), return_counts=True)
+        c = self.filter[cells].astype(np.int64)
+        self.filter[cells] = np.where(c == 255, 255, np.clip(c + sign * n, 0, 255))
 
     def _locate(self, q: np.ndarray) -> np.ndarray:
         """Table position of each (Q,) packed key, -1 where absent."""
@@ -110,6 +128,31 @@ class KeyHash:
         pos = self._locate(q)
         return np.where(pos >= 0, self.vals[np.maximum(pos, 0)], -1)
 
+    def maybe_present(self, q: np.ndarray) -> np.ndarray:
+        """Indices into (Q,) packed keys of those that may be present (the others are not):
+        one lookup in ``filter`` per query, for many queries of which few are present (ray
+        samples in free space); :meth:`find_present` settles the rest."""
+        return np.flatnonzero(np.take(self.filter, self._home(q, self._fshift)))
+
+    def find_present(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Indices into (Q,) packed keys of those present, ascending, and their slots.
+
+        Unlike :meth:`find`, no (Q,) result: suits queries of which few are present."""
+        idx = np.arange(len(q))
+        pos = self._home(q)
+        mask = self.capacity - 1
+        hits, hit_pos = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        while idx.size:
+            k = np.take(self.keys, pos)
+            hit = k == q[idx]
+            hits.append(idx[hit])
+            hit_pos.append(pos[hit])
+            go_on = ~hit & (k != _EMPTY)  # tombstones do not end a probe chain
+            idx, pos = idx[go_on], (pos[go_on] + 1) & mask
+        found, at = np.concatenate(hits), np.concatenate(hit_pos)
+        order = np.argsort(found, kind="stable")
+        return found[order], self.vals[at[order]]
+
     def insert(self, q: np.ndarray, vals: np.ndarray) -> None:
         """Insert (Q,) distinct packed keys that are not in the table, with their slots."""
         if len(q) == 0:
@@ -131,10 +174,12 @@ class KeyHash:
             idx = np.concatenate([idx[~free], ci[~won]])
             pos = (np.concatenate([pos[~free], cp[~won]]) + 1) & mask
         self.size += len(q)
+        self._count(q, 1)
 
     def delete(self, q: np.ndarray) -> None:
         """Remove (Q,) distinct packed keys that are in the table."""
         pos = self._locate(q)
+        self._count(q[pos >= 0], -1)
         pos = pos[pos >= 0]
         self.keys[pos] = _TOMB
         self.size -= len(pos)
@@ -146,6 +191,19 @@ class KeyHash:
         self._alloc(max(1 << 4, 1 << int(np.ceil(np.log2(4 * max(live, 1))))))
         self.size = 0
         self.insert(keys, vals)
+
+
+class _ScanGrid(NamedTuple):
+    """One scan's voxels, as :class:`~supportnode.geometry.voxels.VoxelGrid` has them: keys
+    (V, 3) int64 ascending, counts (V,), starts (V,) into the voxel-sorted points, sums
+    (V, 3), outer (V, 6) and local (three (N,) voxel-sorted offsets from the corner)."""
+
+    keys: np.ndarray
+    counts: np.ndarray
+    starts: np.ndarray
+    sums: np.ndarray
+    outer: np.ndarray
+    local: list[np.ndarray]
 
 
 @dataclass
@@ -209,6 +267,7 @@ class VoxelMap:
         self.crop_slack = 0.05 * self.params.radius if crop_slack is None else float(crop_slack)
         self.age_slack = 0.1 * self.params.max_age if age_slack is None else float(age_slack)
         self._rng = np.random.default_rng(seed)
+        self._buffers: dict[str, np.ndarray] = {}  # per-scan scratch, see _buffer
         self._hash = KeyHash()
         self._alloc_store(1 << 12)
         self._free = np.arange(self._capacity - 1, -1, -1, dtype=np.int64)  # stack, pop at end
@@ -331,21 +390,33 @@ class VoxelMap:
         if not finite.all():
             self._stats["points_invalid"] += int((~finite).sum())
             pts = pts[finite]
-        if not in_map_frame:
-            pts = transform_points(pts, pose[:3, :3], pose[:3, 3])
+        # The map frame points as three contiguous columns, what voxelizing works on: the
+        # same operations as transform_points, written straight into columns.
+        if in_map_frame:
+            cols = [np.ascontiguousarray(pts[:, a]) for a in range(3)]
+        else:
+            rot, shift = pose[:3, :3], pose[:3, 3]
+            cols = []
+            for i in range(3):  # three output columns
+                col = np.multiply(pts[:, 0], rot[i, 0])
+                col += pts[:, 1] * rot[i, 1]
+                col += pts[:, 2] * rot[i, 2]
+                col += float(shift[i])
+                cols.append(col)
         origin = pose[:3, 3].copy()
+        npts = len(cols[0])
         self._scans += 1
         self._stats["scans"] += 1
-        self._stats["points_merged"] += len(pts)
+        self._stats["points_merged"] += npts
 
-        slots = self._merge(pts, float(stamp))
+        slots = self._merge(cols, float(stamp))
         removed = []
-        if self.params.clear_free_space and len(pts):
-            removed.append(self._clear(pts, origin))
+        if self.params.clear_free_space and npts:
+            removed.append(self._clear(cols, origin))
         removed.append(self._maybe_forget(float(stamp), origin))
         hit = slots[self._alive[slots]]
-        lo = np.array([pts[:, a].min() for a in range(3)]) if len(pts) else np.full(3, np.inf)
-        hi = np.array([pts[:, a].max() for a in range(3)]) if len(pts) else np.full(3, -np.inf)
+        lo = np.array([c.min() for c in cols]) if npts else np.full(3, np.inf)
+        hi = np.array([c.max() for c in cols]) if npts else np.full(3, -np.inf)
         return Touched(self._keys[hit].copy(), np.concatenate(removed), lo, hi)
 
     def points(self, keys: np.ndarray | None = None) -> np.ndarray:
@@ -433,11 +504,90 @@ class VoxelMap:
         s = self._hash.find(pack_keys(k))
         return s[s >= 0]
 
-    def _merge(self, pts: np.ndarray, stamp: float) -> np.ndarray:
+    def _buffer(self, name: str, n: int, dtype: type) -> np.ndarray:
+        """(n,) scratch array kept across scans: contents undefined, except that a new one
+        is zeroed (``_voxelize`` keeps its "mark" table all False between calls).
+
+        Per-point temporaries of a scan are megabytes; fresh ones cost a page fault per 4 KB
+        on every scan (about as much as the arithmetic on them), reused ones do not."""
+        buf = self._buffers.get(name)
+        if buf is None or len(buf) < n or buf.dtype != dtype:
+            buf = np.zeros(max(n, 2 * len(buf) if buf is not None else 0), dtype)
+            self._buffers[name] = buf
+        return buf[:n]
+
+    def _voxelize(self, cols: list[np.ndarray]) -> _ScanGrid:
+        """:func:`~supportnode.geometry.voxels.voxelize` of the scan's (N,) x, y, z columns,
+        map frame, with identical results (the same float operations in the same order), for
+        the usual case of a scan whose bounding box holds few voxels (a dense rank table);
+        other scans go to ``voxelize`` itself."""
+        size = self.size
+        n = len(cols[0])
+        kcols = [np.floor(c / size) for c in cols]
+        lo = np.array([c.min() for c in kcols])
+        hi = np.array([c.max() for c in kcols])
+        far = max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40
+        dims = (hi - lo + 1.0) if not far else np.full(3, np.inf)
+        if float(np.prod(dims)) > max(8 * n, 1 << 20):
+            grid = voxelize(np.stack(cols, axis=1), np.full(3, size))  # raises when too far
+            return _ScanGrid(grid.keys, grid.counts, grid.starts, grid.sums, grid.outer, grid.local)
+        # Linear key of each point's voxel in the scan's box, in float64 (exact: integers
+        # below 2^53) and in place, converted once.
+        lin_f = self._buffer("lin_f", n, np.float64)
+        np.subtract(kcols[0], lo[0], out=lin_f)
+        lin_f *= float(dims[1])
+        lin_f += kcols[1]
+        lin_f -= lo[1]
+        lin_f *= float(dims[2])
+        lin_f += kcols[2]
+        lin_f -= lo[2]
+        lin = self._buffer("lin", n, np.int64)
+        lin[...] = lin_f
+        # Occupied linear keys in ascending order from a mark table (reset after use, so it
+        # stays all False), then each point's voxel rank by a table lookup.
+        dims = dims.astype(np.int64)
+        top = int(np.prod(dims)) - 1
+        mark = self._buffer("mark", top + 1, np.bool_)
+        mark[lin] = True
+        lin_of_voxel = np.flatnonzero(mark)
+        mark[lin_of_voxel] = False
+        nvox = len(lin_of_voxel)
+        if nvox <= 1 << 16:
+            # 16-bit ranks: numpy's stable sort of uint16 is one radix pass.
+            rank = self._buffer("rank16", top + 1, np.uint16)
+            rank[lin_of_voxel] = np.arange(nvox, dtype=np.uint16)
+            point_voxel = rank[lin]
+            order = np.argsort(point_voxel, kind="stable")
+        else:
+            rank = self._buffer("rank", top + 1, np.int64)
+            rank[lin_of_voxel] = np.arange(nvox)
+            point_voxel = rank[lin]
+            order = argsort_keys(point_voxel, top=nvox - 1)
+        counts = np.bincount(point_voxel, minlength=nvox)
+        starts = np.cumsum(counts) - counts
+        rem, kz = np.divmod(lin_of_voxel, dims[2])
+        kx, ky = np.divmod(rem, dims[1])
+        keys = np.stack([kx, ky, kz], axis=1) + lo.astype(np.int64)
+        # Offsets from the voxel corner, as voxelize computes them, sorted by voxel.
+        local = []
+        for a in range(3):  # three axes
+            off = np.multiply(kcols[a], size, out=kcols[a])
+            np.subtract(cols[a], off, out=off)
+            local.append(np.take(off, order, out=self._buffer(f"local{a}", n, np.float64)))
+        sums = np.empty((nvox, 3))
+        for a in range(3):  # three axes
+            sums[:, a] = np.add.reduceat(local[a], starts)
+        outer = np.empty((nvox, 6))
+        prod = self._buffer("prod", n, np.float64)
+        for col, (a, b) in enumerate(OUTER_INDEX):  # six entries
+            outer[:, col] = np.add.reduceat(np.multiply(local[a], local[b], out=prod), starts)
+        return _ScanGrid(keys, counts, starts, sums, outer, local)
+
+    def _merge(self, cols: list[np.ndarray], stamp: float) -> np.ndarray:
         """Add the scan's voxel moments to the store; returns the (V,) slots hit."""
-        if len(pts) == 0:
+        if len(cols[0]) == 0:
             return np.zeros(0, np.int64)
-        grid = voxelize(pts, np.full(3, self.size))
+        grid = self._voxelize(cols)
         packed = pack_keys(grid.keys)
         slots = self._hash.find(packed)
         new = np.flatnonzero(slots < 0)
@@ -465,27 +615,84 @@ class VoxelMap:
             self._keep_recent(grid, slots)
         return slots
 
-    def _keep_recent(self, grid: VoxelGrid, slots: np.ndarray) -> None:
+    def _keep_recent(self, grid: _ScanGrid, slots: np.ndarray) -> None:
         """Ring buffer of the newest ``keep_points`` raw points per voxel (relative to corner).
 
         From each scan, up to ``keep_points`` of a voxel's points enter the ring, evenly spaced
         in input order (a lidar's input order runs along its rings, so they spread over the
         voxel rather than bunch at one end); they overwrite the oldest ones."""
         k = self.keep_points
-        counts = grid.counts
-        take = np.minimum(counts, k)
-        voxel = np.repeat(np.arange(len(counts)), take)
-        j = np.arange(len(voxel)) - np.repeat(np.cumsum(take) - take, take)
+        counts, starts = grid.counts, grid.starts
+        # Voxels with k points or more (most) refill their whole ring: the pick meant for
+        # position (head + j) % k lands there, so each ring row is written once, contiguous,
+        # and its head stays put.
+        full = np.flatnonzero(counts >= k)
+        s = slots[full]
+        j = np.arange(k) - self._raw_head[s][:, None]  # pick number of each ring position
+        j[j < 0] += k
         # Evenly spaced picks among the voxel's points, not just its first ones.
-        pick = grid.starts[voxel] + (j * counts[voxel]) // take[voxel]
-        local = np.stack([grid.local[a][pick] for a in range(3)], axis=1)
-        s = slots[voxel]
-        col = (self._raw_head[s] + j) % k
-        self._raw[s, col] = local.astype(np.float32)
-        self._raw_head[slots] = (self._raw_head[slots] + take) % k
-        self._raw_n[slots] = np.minimum(self._raw_n[slots] + take, k)
+        pick = starts[full, None] + (j * counts[full, None]) // k
+        vals = np.empty((len(full), k, 3), np.float32)
+        for a in range(3):  # three axes
+            vals[:, :, a] = grid.local[a][pick]
+        self._raw[s] = vals
+        self._raw_n[s] = k
+        # Voxels with fewer points keep all of them (the even spacing picks every one) at
+        # the ring positions after the head.
+        part = np.flatnonzero(counts < k)
+        s, take = slots[part], counts[part]
+        head = self._raw_head[s]
+        j = np.arange(k)
+        use = j < take[:, None]
+        pick = (starts[part, None] + j)[use]
+        col = head[:, None] + j
+        col[col >= k] -= k  # (head + j) % k, as head < k and j < k
+        dest = (s[:, None] * k + col)[use]
+        vals = np.empty((len(pick), 3), np.float32)
+        for a in range(3):  # three axes
+            vals[:, a] = grid.local[a][pick]
+        self._raw.reshape(-1, 3)[dest] = vals
+        head += take
+        head[head >= k] -= k
+        self._raw_head[s] = head
+        self._raw_n[s] = np.minimum(self._raw_n[s] + take, k)
 
-    def _clear(self, pts: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    def _sample_keys(
+        self, u: np.ndarray, n: np.ndarray, ends: np.ndarray, origin: np.ndarray
+    ) -> np.ndarray:
+        """Packed keys of the samples of rays with unit directions u (R, 3), n (R,) samples
+        each ending at ``ends`` (cumsum of n): sample j at ``origin + u * (j + 0.5) * size``.
+
+        The samples outnumber the rays ~50:1, so every pass over them counts: t is built in
+        float64 (integers < 2^53 are exact, so this equals converting the integer j), and the
+        keys axis by axis in reused buffers, with np.repeat of the direction rather than a
+        gather by a per-sample ray index, and no (S, 3) temporaries. Samples lie between the
+        origin and in-range hits, so their keys are in range too."""
+        size = self.size
+        m = int(ends[-1]) if len(ends) else 0
+        t = np.arange(m, dtype=np.float64)
+        t -= np.repeat((ends - n).astype(np.float64), n)
+        t += 0.5
+        t *= size
+        # x and y keys are combined in float64 first: (kx + off) * 2^22 + ky + off < 2^44 is
+        # exact, and one conversion and shift of it replace two.
+        fx, buf = np.empty(m), np.empty(m)
+        for a, out in ((0, fx), (1, buf), (2, buf)):  # three axes
+            np.multiply(np.repeat(u[:, a], n), t, out=out)
+            out += origin[a]
+            out /= size
+            np.floor(out, out=out)
+            if a == 1:
+                fx *= float(1 << _BITS_XY)
+                fx += buf
+                fx += float(_OFFS[0] << _BITS_XY | _OFFS[1])
+                packed = fx.astype(np.int64)
+                packed <<= _SHIFTS[1]
+        buf += float(_OFFS[2])
+        packed |= buf.astype(np.int64)
+        return packed
+
+    def _clear(self, cols: list[np.ndarray], origin: np.ndarray) -> np.ndarray:
         """Free-space clearing along the scan's rays; returns the removed (R, 3) keys.
 
         Rays (a random subset of ``clear_rays``) are sampled every voxel length from the origin
@@ -502,8 +709,11 @@ class VoxelMap:
         """
         size = self.size
         pack_keys(np.floor(origin / size).astype(np.int64)[None])  # range check of the origin
-        if len(pts) > self.clear_rays:
-            pts = pts[self._rng.choice(len(pts), self.clear_rays, replace=False)]
+        if len(cols[0]) > self.clear_rays:
+            pick = self._rng.choice(len(cols[0]), self.clear_rays, replace=False)
+            pts = np.stack([c[pick] for c in cols], axis=1)
+        else:
+            pts = np.stack(cols, axis=1)
         d = pts - origin
         dist = np.sqrt(np.einsum("ij,ij->i", d, d))
         ok = dist > 3 * size
@@ -516,23 +726,33 @@ class VoxelMap:
         # clearing there; half steps would double the cost for little.
         step = size
         n = np.maximum(np.floor((rng_ - 2 * size) / step).astype(np.int64), 0)
-        ray = np.repeat(np.arange(len(n)), n)
-        t = (np.arange(len(ray)) - np.repeat(np.cumsum(n) - n, n) + 0.5) * step
-        # Column by column and packed on the fly: no (S, 3) temporaries. Samples lie between
-        # the origin and in-range hits, so they are in range too.
-        packed = np.zeros(len(ray), np.int64)
-        for a in range(3):  # three axes
-            k = np.floor((origin[a] + u[ray, a] * t) / size).astype(np.int64) + _OFFS[a]
-            packed |= k << _SHIFTS[a]
-        # Consecutive samples of one ray often share a voxel: look each up once.
-        first = np.ones(len(packed), bool)
-        first[1:] = (packed[1:] != packed[:-1]) | (ray[1:] != ray[:-1])
-        ray, packed = ray[first], packed[first]
-        slot = self._hash.find(packed)
-        met = slot >= 0
-        ray, slot = ray[met], slot[met]
+        ends = np.cumsum(n)
+        # Samples go in chunks of whole rays whose temporaries stay in cache (2-3x faster than
+        # one pass over all samples, which are ~50 per ray); each chunk is looked up at once.
+        total = int(ends[-1]) if len(n) else 0
+        cuts = np.searchsorted(ends, np.arange(_CHUNK, total, _CHUNK), side="right")
+        bounds = [0, *np.unique(cuts[cuts < len(n)]).tolist(), len(n)]
+        # Each chunk only sifts out the samples that may meet a stored voxel (a few %): the
+        # probe loop then runs once for all of them (its iterations cost microseconds each).
+        samples, keys = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        for r0, r1 in pairwise(bounds):  # a few chunks per scan
+            s0 = int(ends[r0 - 1]) if r0 else 0
+            packed = self._sample_keys(u[r0:r1], n[r0:r1], ends[r0:r1] - s0, origin)
+            idx = self._hash.maybe_present(packed)
+            samples.append(idx + s0)
+            keys.append(packed[idx])
+        found, slot = self._hash.find_present(np.concatenate(keys))
+        sample = np.concatenate(samples)[found]
         met = self._last_scan[slot] != self._scans  # hit by this scan: seen, not seen through
-        ray, slot = ray[met], slot[met]
+        sample, slot = sample[met], slot[met]
+        # Consecutive samples of one ray often share a voxel: count each (ray, voxel) once.
+        # Per axis the key is monotone along a ray (so is rounding), so a ray cannot come
+        # back to a voxel it left and duplicates are adjacent; samples between
+        # two of them share their key, so they survived the filters above too.
+        ray = np.searchsorted(ends, sample, side="right")
+        first = np.ones(len(slot), bool)
+        first[1:] = (slot[1:] != slot[:-1]) | (ray[1:] != ray[:-1])
+        ray, slot = ray[first], slot[first]
         if len(slot) == 0:
             return np.zeros((0, 3), np.int64)
 
