@@ -12,6 +12,8 @@ from supportnode.node.tracking import (
     overlap_matrix,
     pack_cells,
     polygon_cells,
+    polygons_cells_packed,
+    unpack_cells,
 )
 
 
@@ -103,3 +105,42 @@ def test_polygon_cells_and_bad_input():
     assert len(polygon_cells(np.array([[0.001, 0.001]]), 0.02)) == 1
     with pytest.raises(InputError):
         OverlapTracker().update([_rect(0, 0, 2, 2)], [0.0, 1.0])
+
+
+def _cells_brute(poly: np.ndarray, c: float) -> set:
+    """Reference: cell centres inside (every edge's cross product >= -1e-12), the outline's
+    cells sampled every half cell, and the centroid's cell."""
+    lo = np.floor(poly.min(axis=0) / c).astype(int)
+    hi = np.floor(poly.max(axis=0) / c).astype(int)
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
+    xc, yc = (gx.ravel() + 0.5) * c, (gy.ravel() + 0.5) * c
+    inside = np.ones(len(xc), bool)
+    if len(poly) >= 3:
+        for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):
+            inside &= (b[0] - a[0]) * (yc - a[1]) - (b[1] - a[1]) * (xc - a[0]) >= -1e-12
+    else:
+        inside[:] = False
+    cells = {(int(i), int(j)) for i, j in zip(gx.ravel()[inside], gy.ravel()[inside], strict=True)}
+    for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):
+        n = max(int(np.ceil(np.hypot(*(b - a)) / (0.5 * c))), 1)
+        for t in np.arange(n) / n:
+            cells.add(tuple(np.floor((a + t * (b - a)) / c).astype(int).tolist()))
+    cells.add(tuple(np.floor(poly.mean(axis=0) / c).astype(int).tolist()))
+    return cells
+
+
+def test_polygons_cells_in_one_pass_match_each_polygon():
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(3)
+    polys = [np.zeros((0, 2)), np.array([[0.011, 0.013]]), np.array([[0.0, 0.0], [0.1, 0.0]])]
+    polys.append(np.array([[0.0, 0.0], [0.2, 0.0], [0.2, 0.1], [0.0, 0.1]]))  # vertical edges
+    for _ in range(40):
+        pts = rng.normal(size=(8, 2)) * rng.uniform(0.01, 0.3) + rng.uniform(-2, 2, 2)
+        polys.append(pts[ConvexHull(pts).vertices])
+    batch = polygons_cells_packed(polys, 0.02)
+    assert len(batch) == len(polys) and len(batch[0]) == 0
+    for poly, packed in zip(polys[1:], batch[1:], strict=True):
+        assert np.all(np.diff(packed) > 0)  # sorted, distinct
+        assert {tuple(c) for c in unpack_cells(packed).tolist()} == _cells_brute(poly, 0.02)
+        assert np.array_equal(polygon_cells(poly, 0.02), unpack_cells(packed))

@@ -144,6 +144,8 @@ def detect_surfaces(
     surfaces, sorted_labels = _summarise(grid, sorted_labels, surface_of_voxel, params)
     if params.method == "planar":
         surfaces, sorted_labels = _drop_unfit(grid, surfaces, sorted_labels, params, sensor_origin)
+    for s in surfaces:  # outlines only of the surfaces kept: tracing one costs about a ms
+        s.outline = cells_outline(s.cells, s.cell_size)
     labels = np.full(len(pts), -1, dtype=np.int32)
     if keep is None:
         labels[grid.order] = sorted_labels
@@ -848,7 +850,7 @@ def _summarise(
                 flatness=float(flatness[c]),
                 bbox_min=bmin[c],
                 bbox_max=bmax[c],
-                outline=cells_outline(cells, (vx, vy)),
+                outline=[],  # traced once the surface is kept (detect_surfaces)
                 point_count=int(counts[c]),
                 voxel_count=int(vcount[c]),
                 cells=cells,

@@ -50,66 +50,116 @@ def polygon_cells(polygon: np.ndarray, cell_size: float) -> np.ndarray:
 
 def polygon_cells_packed(polygon: np.ndarray, cell_size: float) -> np.ndarray:
     """Packed cells (C,) (:func:`pack_cells`) of a grid of ``cell_size`` metres whose centres
-    lie inside a convex
-    counter-clockwise (K, 2) polygon (e.g. ``Cluster.footprint``), plus the cells its outline
-    runs through and the cell of its centroid, so slivers and tiny objects still have a
-    footprint. Sorted like ``np.unique(axis=0)``.
+    lie inside a convex counter-clockwise (K, 2) polygon (e.g. ``Cluster.footprint``), plus
+    the cells its outline runs through and the cell of its centroid, so slivers and tiny
+    objects still have a footprint. Sorted like ``np.unique(axis=0)``."""
+    return polygons_cells_packed([polygon], cell_size)[0]
+
+
+def polygons_cells_packed(polygons: list[np.ndarray], cell_size: float) -> list[np.ndarray]:
+    """:func:`polygon_cells_packed` of each (K_i, 2) polygon: (C_i,) packed cells each, in the
+    order given, computed for all polygons in one vectorised pass (a scan has tens of
+    clusters; a loop over them cost more than the cells).
 
     Column by column: in a counter-clockwise polygon the edges running towards +x bound the
     inside from below and those running towards -x from above, so each grid column's cells are
-    one interval. Cost grows with the columns and the cells returned, not with the bounding box
-    (a room-sized wall hull at 2 cm would be 50,000 point-in-polygon tests per edge).
-    """
-    poly = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
-    if len(poly) == 0:
-        return np.zeros(0, np.int64)
-    lo = np.floor(poly.min(axis=0) / cell_size).astype(np.int64)
-    hi = np.floor(poly.max(axis=0) / cell_size).astype(np.int64)
-    cols = np.arange(lo[0], hi[0] + 1)
-    y_lo = np.full(len(cols), lo[1], np.int64)
-    y_hi = np.full(len(cols), hi[1], np.int64)
-    if len(poly) >= 3:
-        xc = (cols + 0.5) * cell_size
-        a = poly
-        d = np.roll(poly, -1, axis=0) - poly
-        keep = np.ones(len(cols), bool)
-        # The same test as "cross product >= -1e-12" for every edge, solved for y.
-        up, down, vert = d[:, 0] > 0, d[:, 0] < 0, d[:, 0] == 0
-        if up.any():
-            line = a[up, 1, None] + d[up, 1, None] / d[up, 0, None] * (xc - a[up, 0, None])
-            line -= 1e-12 / d[up, 0, None]
-            y_lo = np.maximum(y_lo, np.ceil(line.max(axis=0) / cell_size - 0.5).astype(np.int64))
-        if down.any():
-            line = a[down, 1, None] + d[down, 1, None] / d[down, 0, None] * (xc - a[down, 0, None])
-            line -= 1e-12 / d[down, 0, None]
-            y_hi = np.minimum(y_hi, np.floor(line.min(axis=0) / cell_size - 0.5).astype(np.int64))
-        for ax, dy in zip(a[vert, 0], d[vert, 1], strict=True):  # vertical edges: a few at most
-            if dy > 0:
-                keep &= xc <= ax + 1e-12 / dy
-            elif dy < 0:
-                keep &= xc >= ax + 1e-12 / dy
-        y_hi = np.where(keep, y_hi, y_lo - 1)
+    one interval. Cost grows with the columns and the cells returned, not with the bounding
+    box (a room-sized wall hull at 2 cm would be 50,000 point-in-polygon tests per edge)."""
+    polys = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in polygons]
+    out = [np.zeros(0, np.int64) for _ in polys]
+    live = [i for i, p in enumerate(polys) if len(p)]
+    if not live:
+        return out
+    ps = [polys[i] for i in live]
+    nv = np.array([len(p) for p in ps])
+    a = np.concatenate(ps)
+    vid = np.repeat(np.arange(len(ps)), nv)  # polygon of each vertex / edge
+    first = np.cumsum(nv) - nv
+    nxt = np.arange(len(a)) + 1
+    last = first + nv - 1
+    nxt[last] = first  # each polygon closes on its first vertex
+    d = a[nxt] - a
+    lo = np.stack([np.minimum.reduceat(a[:, k], first) for k in range(2)], axis=1)
+    hi = np.stack([np.maximum.reduceat(a[:, k], first) for k in range(2)], axis=1)
+    lo = np.floor(lo / cell_size).astype(np.int64)
+    hi = np.floor(hi / cell_size).astype(np.int64)
+    width = hi[:, 0] - lo[:, 0] + 1
+    height = hi[:, 1] - lo[:, 1] + 1
+    # Every column of every polygon.
+    cpid = np.repeat(np.arange(len(ps)), width)
+    cols = np.arange(len(cpid)) - np.repeat(np.cumsum(width) - width, width) + lo[cpid, 0]
+    y_lo = lo[cpid, 1].copy()
+    y_hi = hi[cpid, 1].copy()
+    xc = (cols + 0.5) * cell_size
+    # (edge, column) pairs of the same polygon, grouped by column; polygons of fewer than three
+    # vertices have no inside test (their cells are the outline's).
+    ne = np.where(nv >= 3, nv, 0)[cpid]
+    pcol = np.repeat(np.arange(len(cpid)), ne)
+    pe = np.arange(len(pcol)) - np.repeat(np.cumsum(ne) - ne, ne) + first[cpid[pcol]]
+    if len(pcol):
+        dx, dy = d[pe, 0], d[pe, 1]
+        x = xc[pcol]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # The same test as "cross product >= -1e-12" for every edge, solved for y.
+            line = a[pe, 1] + dy / dx * (x - a[pe, 0])
+            line -= 1e-12 / dx
+        has = np.flatnonzero(ne > 0)
+        starts = (np.cumsum(ne) - ne)[has]
+        up = dx > 0
+        low = np.maximum.reduceat(np.where(up, line, -np.inf), starts)
+        top = np.minimum.reduceat(np.where(dx < 0, line, np.inf), starts)
+        any_up = np.logical_or.reduceat(up, starts)
+        any_down = np.logical_or.reduceat(dx < 0, starts)
+        y_lo[has] = np.where(
+            any_up,
+            np.maximum(y_lo[has], np.ceil(low / cell_size - 0.5).astype(np.int64)),
+            y_lo[has],
+        )
+        y_hi[has] = np.where(
+            any_down,
+            np.minimum(y_hi[has], np.floor(top / cell_size - 0.5).astype(np.int64)),
+            y_hi[has],
+        )
+        vert = dx == 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = a[pe, 0] + 1e-12 / dy
+        fail = vert & (((dy > 0) & ~(x <= bound)) | ((dy < 0) & ~(x >= bound)))
+        drop = np.logical_or.reduceat(fail, starts)
+        y_hi[has] = np.where(drop, y_lo[has] - 1, y_hi[has])
+    # Inside cells, as keys local to each polygon's bounding box: (ix - lo_x) * H + (iy - lo_y),
+    # offset per polygon, so they sort like packed (ix, iy) within a polygon and by polygon.
+    box = width * height
+    base = np.cumsum(box) - box
     n = np.maximum(y_hi - y_lo + 1, 0)
-    cx = np.repeat(cols, n)
-    cy = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(y_lo, n)
-    # The cells along the outline too: the footprint of a flat vertical face (a box side seen
-    # alone) is a sliver with no cell centre inside, and one cell at its centroid would make
-    # its overlap with the same face in the next scan a matter of luck.
-    a = poly
-    d = np.roll(poly, -1, axis=0) - poly if len(poly) > 1 else np.zeros((1, 2))
-    steps = np.maximum(np.ceil(np.hypot(d[:, 0], d[:, 1]) / (0.5 * cell_size)), 1).astype(np.int64)
+    ccol = np.repeat(np.arange(len(cpid)), n)
+    cy = np.arange(len(ccol)) - np.repeat(np.cumsum(n) - n, n) + y_lo[ccol]
+    p_in = cpid[ccol]
+    inside = base[p_in] + (cols[ccol] - lo[p_in, 0]) * height[p_in] + (cy - lo[p_in, 1])
+    # The cells along the outline and of the centroid (see polygon_cells_packed).
+    dd = np.where((nv > 1)[vid, None], d, 0.0)
+    steps = np.maximum(np.ceil(np.hypot(dd[:, 0], dd[:, 1]) / (0.5 * cell_size)), 1)
+    steps = steps.astype(np.int64)
     e = np.repeat(np.arange(len(a)), steps)
     t = (np.arange(len(e)) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[e]
-    edge = np.floor((a[e] + t[:, None] * d[e]) / cell_size).astype(np.int64)
-    own = np.floor(poly.mean(axis=0) / cell_size).astype(np.int64)[None]
-    inside = _pack(cx, cy)  # column by column, row by row: sorted and distinct
-    extra = pack_cells(np.concatenate([edge, own]))  # a few hundred cells
-    if len(inside) == 0:
-        return extra
-    # Merge the outline's cells into the sorted inside ones without sorting them all again.
+    edge = np.floor((a[e] + t[:, None] * dd[e]) / cell_size).astype(np.int64)
+    sums = np.stack([np.add.reduceat(a[:, k], first) for k in range(2)], axis=1)
+    own = np.floor(sums / nv[:, None] / cell_size).astype(np.int64)
+    ep = np.concatenate([vid[e], np.arange(len(ps))])
+    ec = np.concatenate([edge, own])
+    extra = base[ep] + (ec[:, 0] - lo[ep, 0]) * height[ep] + (ec[:, 1] - lo[ep, 1])
+    extra, first_of = np.unique(extra, return_index=True)
     pos = np.searchsorted(inside, extra)
-    known = (pos < len(inside)) & (inside[np.minimum(pos, len(inside) - 1)] == extra)
-    return np.insert(inside, pos[~known], extra[~known])
+    new = np.ones(len(extra), bool)
+    if len(inside):
+        new = ~((pos < len(inside)) & (inside[np.minimum(pos, len(inside) - 1)] == extra))
+    inside_packed = _pack(cols[ccol], cy)
+    extra_packed = _pack(ec[first_of[new], 0], ec[first_of[new], 1])
+    packed = np.insert(inside_packed, pos[new], extra_packed)
+    count = np.bincount(p_in, minlength=len(ps)) + np.bincount(ep[first_of[new]], minlength=len(ps))
+    bounds = np.concatenate([[0], np.cumsum(count)])
+    for k, i in enumerate(live):  # one slice per polygon
+        out[i] = packed[bounds[k] : bounds[k + 1]]
+    return out
 
 
 def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
@@ -133,8 +183,7 @@ def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
     n = stop - start
     rows = np.repeat(la, n)
     idx = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(start, n)
-    inter = np.zeros((na, nb))
-    np.add.at(inter, (rows, lb[idx]), 1.0)
+    inter = np.bincount(rows * nb + lb[idx], minlength=na * nb).reshape(na, nb).astype(float)
     union = size_a[:, None] + size_b[None, :] - inter
     np.divide(inter, union, out=iou, where=union > 0)
     return iou
@@ -283,7 +332,7 @@ class ClusterTracker(OverlapTracker):
 
     def update_clusters(self, clusters: list, surface_ids: np.ndarray | None = None) -> TrackUpdate:
         """clusters: list of Cluster; surface_ids: (D,) stable surface id under each (-1 none)."""
-        packed = [polygon_cells_packed(c.footprint, self.cell_size) for c in clusters]
+        packed = polygons_cells_packed([c.footprint for c in clusters], self.cell_size)
         bottoms = np.array([float(c.bbox_min[2]) for c in clusters])
         grp = (
             np.full(len(clusters), -1, np.int64)
