@@ -77,6 +77,8 @@ _GRAVITY_EVERY = 10
 _TIME_JUMP = 1e-3
 # How long one wait for a scan lasts in spin: bounds the reaction time to a stop request.
 _POLL_S = 0.05
+# A scan handed to detection while it was busy waits at most this long for a newer one.
+_FRESH_WAIT_MAX_S = 0.5
 # Points of the published map at most (3 MB a message): a map of millions of voxels is thinned.
 MAP_MAX_POINTS = 262_144
 
@@ -243,6 +245,8 @@ class Node(Closing):
         self._pub_lock = threading.Lock()
         self._job_ready = threading.Condition()
         self._job: _Job | None = None
+        self._scan_period: float | None = None  # running mean of the time between scans, s
+        self._last_recv: float | None = None
         self._generation = 0
         self.reset()
 
@@ -647,6 +651,12 @@ class Node(Closing):
         if not self._detection_due(job.stamp):
             return
         job.t_recv = t_recv
+        if self._last_recv is not None:
+            dt = t_recv - self._last_recv
+            self._scan_period = (
+                dt if self._scan_period is None else 0.8 * self._scan_period + 0.2 * dt
+            )
+        self._last_recv = t_recv
         with self._job_ready:
             if self._job is not None:
                 # Detection is still busy with an older scan: that one's region stays pending,
@@ -656,13 +666,32 @@ class Node(Closing):
             self._job_ready.notify()
 
     def _detect_loop(self) -> None:
-        """Detection thread: detect on the newest ingested scan, publish, repeat."""
+        """Detection thread: detect on the newest ingested scan, publish, repeat.
+
+        A scan that arrived while the previous detection ran is already old; when scans come
+        regularly, the next one is due within a scan period, and detecting that one instead
+        gives results that are as frequent but fresher (latency = merge + detection, with no
+        wait for a busy detector in it). So the detector waits for it, up to one and a half
+        periods (at most ``_FRESH_WAIT_MAX_S``), and takes the old scan if none comes: the
+        last scan of a stream is always detected."""
+        done_at = 0.0
         while True:
             with self._job_ready:
                 while self._job is None and not self._stop.is_set():
                     self._job_ready.wait(_POLL_S)
                 if self._stop.is_set():
                     return
+                job = self._job
+                period = self._scan_period
+                if job.t_recv < done_at and period is not None:
+                    deadline = job.t_recv + min(1.5 * period, _FRESH_WAIT_MAX_S)
+                    while self._job is job and not self._stop.is_set():
+                        left = deadline - time.perf_counter()
+                        if left <= 0:
+                            break
+                        self._job_ready.wait(min(left, _POLL_S))
+                    if self._stop.is_set():
+                        return
                 job, self._job = self._job, None
             timings: dict[str, float] = {}
             t = time.perf_counter()
@@ -671,7 +700,8 @@ class Node(Closing):
             except Exception as err:
                 self.log.exception("scan at %.3f: internal error in detection", job.stamp)
                 self._reject("internal_error", f"detection: {type(err).__name__}: {err}")
-                continue
+                out = None
+            done_at = time.perf_counter()
             if out is None:
                 continue
             timings["detect"] = time.perf_counter() - t
