@@ -20,6 +20,7 @@ import numpy as np
 
 from supportnode.client import Publisher, Subscriber, SupportSurfaces, pose_from_matrix
 from supportnode.msgs import PointCloud
+from supportnode.node.allocator import retain_freed_memory
 from supportnode.node.node import Node
 from supportnode.sim import Lidar, load_scene, parse_scene, poses_for
 from supportnode.sim.scene import scene_path
@@ -251,7 +252,14 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--lidar", default="os128", help="simulated lidar preset (os128, vlp16)")
     ap.add_argument("--only", default="stages,e2e,growth,rate,ids")
+    ap.add_argument(
+        "--default-malloc",
+        action="store_true",
+        help="leave glibc's allocator as it is (supportnode run keeps freed memory)",
+    )
     args = ap.parse_args()
+    if not args.default_malloc:
+        retain_freed_memory()  # as `supportnode run` does
     parts = set(args.only.split(","))
     scene = scene_by_name(args.scene)
     lidar = Lidar.preset(args.lidar)

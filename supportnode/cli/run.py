@@ -21,6 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from supportnode.config import load_config
+    from supportnode.node.allocator import retain_freed_memory
     from supportnode.node.node import Node
 
     params = load_config(args.config, args.overrides)
@@ -29,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
         level=getattr(logging, args.log_level),
         format=f"[{params.node.name}] %(levelname)s %(message)s",
     )
+    retain_freed_memory()  # a node's working set repeats scan after scan: keep it mapped
     # Sockets are opened inside spin and closed by the with block, also on SIGINT/SIGTERM,
     # which spin turns into a normal return (exit code 0).
     with Node(params) as node:
