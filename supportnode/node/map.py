@@ -464,10 +464,13 @@ class VoxelMap:
         corner = self._keys[slots] * self.size
         if self.representation == "centroid":
             return corner + self._sums[slots] / self._count[slots, None]
+        k = self._raw.shape[1]
         n = self._raw_n[slots]
-        rows = np.repeat(np.arange(len(slots)), n)
-        cols = np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n)
-        return corner[rows] + self._raw[slots[rows], cols]
+        # Rings fill from slot 0, so the kept points of a voxel are its first n columns: one
+        # mask over (V, k) picks them in row order (a gather per (row, column) pair costs 3x).
+        have = np.arange(k)[None, :] < n[:, None]
+        raw = np.take(self._raw, slots, axis=0)[have]
+        return np.repeat(corner, n, axis=0) + raw
 
     def voxels(self, keys: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Per-voxel state (copies), of the given (Q, 3) keys or of all voxels.
