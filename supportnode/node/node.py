@@ -373,13 +373,15 @@ class Node(Closing):
             self._items_rotation, rotation, atol=1e-9
         )
         fetch_time = [0.0]
+        # Scans with gravity in their pose (and no correction yet): the map frame is level.
+        level = bool(np.array_equal(rotation, np.eye(3)))
 
         def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
             t = time.perf_counter()
             with self._lock:
                 pts = self.map.points_in_box(blo, bhi, rotation, max_share)
             if pts is not None:
-                pts = transform_points(pts, rotation)
+                pts = pts if level else transform_points(pts, rotation)
                 pts = pts[np.all((pts[:, :2] >= blo) & (pts[:, :2] <= bhi), axis=1)]
             fetch_time[0] += time.perf_counter() - t
             return pts
@@ -391,7 +393,7 @@ class Node(Closing):
             t = time.perf_counter()
             with self._lock:
                 raw = self.map.points()
-            points = transform_points(raw, rotation)
+            points = raw if level else transform_points(raw, rotation)
             fetch_time[0] += time.perf_counter() - t
             items = incremental.full(points, self.params)
         timings["points"] = fetch_time[0]
