@@ -242,3 +242,38 @@ def test_points_in_box_holds_every_point_in_the_box(rng, tilt_deg):
     key = lambda p: set(map(tuple, np.round(p, 9)))  # noqa: E731
     assert key(got) == key(want)
     assert m.points_in_box(np.array([-9.0, -9.0]), np.array([9.0, 9.0]), rot, 0.8) is None
+
+
+def test_stable_points_repeat_on_a_static_scene_and_renew_where_it_changed(rng):
+    """ "stable" (the default): a static scene scanned again gives detection the very same
+    points, so clusters and ids do not flicker; where a new scan shows a different plane in a
+    voxel (a box lifted off a board: the board's voxels it stood in are hit, never seen
+    through), the voxel's kept points are renewed from it. "recent" renews them every scan."""
+
+    def board():  # dense, level, z = 0.51 (inside one layer of 5 cm voxels)
+        xy = rng.uniform(0.0, 0.5, (6000, 2))
+        return np.c_[xy, np.full(len(xy), 0.51)]
+
+    def box_side():  # a vertical face at x = 0.225 rising from the board
+        yz = np.c_[rng.uniform(0.0, 0.5, 3000), rng.uniform(0.51, 0.8, 3000)]
+        return np.c_[np.full(len(yz), 0.225), yz]
+
+    stable, recent = (
+        _no_clear(),
+        VoxelMap(MapParams(clear_free_space=False, max_age=0.0), representation="recent"),
+    )
+    for m in (stable, recent):
+        m.integrate(board(), EYE, 0.0, in_map_frame=True)
+    first = stable.points()
+    for m in (stable, recent):
+        m.integrate(board(), EYE, 0.1, in_map_frame=True)
+    assert np.array_equal(stable.points(), first)  # the same points: nothing changed
+    assert not np.array_equal(recent.points(), first)
+
+    m = _no_clear()
+    m.integrate(np.vstack([board(), box_side()]), EYE, 0.0, in_map_frame=True)
+    col = np.floor(0.225 / 0.05).astype(int)
+    bottom = lambda p: p[(np.floor(p[:, 0] / 0.05) == col) & (p[:, 2] < 0.55)]  # noqa: E731
+    assert (bottom(m.points())[:, 2] > 0.52).any()  # the box's foot shares the board's voxels
+    m.integrate(board(), EYE, 0.1, in_map_frame=True)  # the box is gone: only the board
+    assert np.abs(bottom(m.points())[:, 2] - 0.51).max() < 1e-6

@@ -40,7 +40,7 @@ _SHIFTS = (_BITS_XY + _BITS_Z, _BITS_Z, 0)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: scatters spatially close keys
 _EMPTY, _TOMB = -1, -2
 _FILTER_BITS = 3  # KeyHash.filter has 2^3 cells per table position
-REPRESENTATIONS = ("recent", "centroid")
+REPRESENTATIONS = ("stable", "recent", "centroid")
 _CHUNK = 1 << 15  # ray samples per chunk in VoxelMap._clear (~256 KB per temporary)
 
 
@@ -226,8 +226,14 @@ class VoxelMap:
     """Incremental voxel map of posed scans (see the module docstring).
 
     params: ``MapParams`` (radius, max_age, max_voxels, voxel_size, clear_free_space).
-    representation: points handed to detection by :meth:`points`: ``"recent"`` keeps the
-        ``keep_points`` newest raw points of every voxel (float32 relative to its corner);
+    representation: points handed to detection by :meth:`points`:
+        ``"stable"`` keeps the first ``keep_points`` raw points a voxel receives (float32
+        relative to its corner, evenly spread over the scans' points in it) and renews them
+        only when rays pass through the voxel (what was there moved): on a static scene the
+        detection input, and so every cluster and id, stays the same from scan to scan, and
+        changes only where the map changes;
+        ``"recent"`` keeps the ``keep_points`` newest raw points of every voxel (a ring: every
+        scan that hits a voxel replaces them, so clusters of partly seen objects flicker);
         ``"centroid"`` gives one point per voxel, the mean of everything merged into it.
     max_evidence: a voxel's evidence grows by one per scan that hits it, up to this cap, and
         drops by one per scan whose rays pass through it (two when three or more rays do); it
@@ -246,7 +252,7 @@ class VoxelMap:
         self,
         params: MapParams | None = None,
         *,
-        representation: str = "recent",
+        representation: str = "stable",
         keep_points: int = 4,
         max_evidence: int = 4,
         clear_rays: int = 8192,
@@ -259,7 +265,7 @@ class VoxelMap:
         if representation not in REPRESENTATIONS:
             raise InputError(f"representation must be one of {REPRESENTATIONS}")
         self.representation = representation
-        self.keep_points = int(keep_points) if representation == "recent" else 0
+        self.keep_points = int(keep_points) if representation != "centroid" else 0
         self.max_evidence = int(max_evidence)
         self.clear_rays = int(clear_rays)
         self.size = float(self.params.voxel_size)
@@ -423,8 +429,8 @@ class VoxelMap:
         """Representative points for detection: (P, 3) float64, map frame, metres.
 
         keys: (Q, 3) int64 voxels to take them from (e.g. ``Touched.keys``; absent ones are
-        skipped), None for the whole map. "recent": up to ``keep_points`` raw points per voxel;
-        "centroid": one point per voxel.
+        skipped), None for the whole map. "stable" and "recent": up to ``keep_points`` raw
+        points per voxel; "centroid": one point per voxel.
         """
         return self._points_of(self._slots(keys))
 
@@ -614,9 +620,66 @@ class VoxelMap:
         self._last_seen[slots] = stamp
         self._last_scan[slots] = self._scans
         self._evidence[slots] = np.minimum(self._evidence[slots] + 1, self.max_evidence)
-        if self.keep_points:
+        if self.representation == "stable":
+            self._keep_first(grid, slots)
+        elif self.keep_points:
             self._keep_recent(grid, slots)
         return slots
+
+    def _keep_first(self, grid: _ScanGrid, slots: np.ndarray) -> None:
+        """Fill the free places of each voxel's ``keep_points`` kept points, in order, with
+        evenly spaced picks (input order: along a lidar's rings) from this scan's points in
+        it; voxels already full keep theirs unless this scan shows that what they hold has
+        changed, and then its points replace them. Rays passing through catch most changes
+        (see :meth:`_clear`), but not a voxel that still holds something: an object lifted off
+        a board leaves the board's points in the voxels it stood in. Changed: this scan's points
+        in the voxel make a plane (at least four, spread in two directions) and a kept point
+        lies off it by more than a fifth of a voxel and three times their rms distance to it
+        (their noise). Fewer points, or a line of them (one lidar ring), say nothing."""
+        k = self.keep_points
+        n = self._raw_n[slots]
+        cnt = grid.counts
+        had = np.flatnonzero((n > 0) & (cnt >= 4))
+        if len(had):
+            c = cnt[had].astype(np.float64)
+            seen = grid.sums[had] / c[:, None]
+            cov = np.empty((len(had), 3, 3))
+            for col, (a, b) in enumerate(OUTER_INDEX):  # six entries, not a loop over voxels
+                v = grid.outer[had, col] / c - seen[:, a] * seen[:, b]
+                cov[:, a, b] = v
+                cov[:, b, a] = v
+            evals, normal = sym3_eigen(cov)
+            # Only a plane (points spread in two directions, as in _clear) says where the kept
+            # points should lie: a lidar ring leaves a line of points in a voxel.
+            planar = (evals[:, 0] < 0.25 * evals[:, 1]) & (evals[:, 1] > (0.1 * self.size) ** 2)
+            had, seen, normal, evals = had[planar], seen[planar], normal[planar], evals[planar]
+            s = slots[had]
+            raw = self._raw[s]  # (V, k, 3) float32, relative to the corner like seen
+            dist = np.abs(
+                raw[:, :, 0] * normal[:, 0, None]
+                + raw[:, :, 1] * normal[:, 1, None]
+                + raw[:, :, 2] * normal[:, 2, None]
+                - np.einsum("ij,ij->i", seen, normal)[:, None]
+            )
+            dist[np.arange(k)[None, :] >= n[had, None]] = 0.0  # places not filled yet
+            tol = np.maximum(0.2 * self.size, 3.0 * np.sqrt(np.maximum(evals[:, 0], 0.0)))
+            self._raw_n[s[dist.max(axis=1) > tol]] = 0
+        room = k - self._raw_n[slots]
+        sel = np.flatnonzero(room > 0)
+        if len(sel) == 0:
+            return
+        counts = grid.counts[sel]
+        take = np.minimum(counts, room[sel])
+        rep = np.repeat(np.arange(len(sel)), take)
+        j = np.arange(len(rep)) - np.repeat(np.cumsum(take) - take, take)
+        pick = grid.starts[sel][rep] + (j * counts[rep]) // take[rep]
+        s = slots[sel]
+        dest = s[rep] * k + self._raw_n[s][rep] + j
+        vals = np.empty((len(pick), 3), np.float32)
+        for a in range(3):  # three axes
+            vals[:, a] = grid.local[a][pick]
+        self._raw.reshape(-1, 3)[dest] = vals
+        self._raw_n[s] += take.astype(np.int32)
 
     def _keep_recent(self, grid: _ScanGrid, slots: np.ndarray) -> None:
         """Ring buffer of the newest ``keep_points`` raw points per voxel (relative to corner).
@@ -799,7 +862,11 @@ class VoxelMap:
         # a voxel may be noise; several are a clear view through it).
         hit_slots, rays_through = np.unique(slot[through], return_counts=True)
         self._evidence[hit_slots] -= np.where(rays_through >= 3, 2, 1).astype(np.int32)
-        gone = hit_slots[self._evidence[hit_slots] <= 0]
+        left = self._evidence[hit_slots] > 0
+        if self.representation == "stable":
+            # Seen through: what the kept points show has moved; the next hits renew them.
+            self._raw_n[hit_slots[left]] = 0
+        gone = hit_slots[~left]
         self._stats["cleared"] += len(gone)
         return self._remove(gone)
 
