@@ -329,10 +329,18 @@ class ClusterTracker(OverlapTracker):
         kw.setdefault("height_tolerance", 0.05)
         super().__init__(**kw)
         self.cell_size = float(cell_size)
+        # Footprint bytes -> packed cells, of the previous update: clusters that did not
+        # change (far away, or a static scene) are not rasterised again.
+        self._cells: dict[bytes, np.ndarray] = {}
 
     def update_clusters(self, clusters: list, surface_ids: np.ndarray | None = None) -> TrackUpdate:
         """clusters: list of Cluster; surface_ids: (D,) stable surface id under each (-1 none)."""
-        packed = polygons_cells_packed([c.footprint for c in clusters], self.cell_size)
+        keys = [np.ascontiguousarray(c.footprint, dtype=np.float64).tobytes() for c in clusters]
+        miss = [i for i, k in enumerate(keys) if k not in self._cells]
+        fresh = polygons_cells_packed([clusters[i].footprint for i in miss], self.cell_size)
+        cells = dict(zip((keys[i] for i in miss), fresh, strict=True))
+        packed = [cells[k] if k in cells else self._cells[k] for k in keys]
+        self._cells = dict(zip(keys, packed, strict=True))
         bottoms = np.array([float(c.bbox_min[2]) for c in clusters])
         grp = (
             np.full(len(clusters), -1, np.int64)
