@@ -8,7 +8,9 @@ sockets, keep-newest input, the diagnostics timer and clean shutdown on SIGINT/S
 `spin` is pipelined (``node.pipeline``): the receiving thread decodes and merges every scan into
 the map as it arrives; a detection thread runs on the newest map state and publishes. When
 detection is slower than the scans, it skips to the newest scan (counted), but the map still
-has every scan. numpy and scipy release the GIL in their loops, so the two threads overlap.
+has every scan; a scan that arrived while detection was busy gives way to the next one when
+that is due within a scan period (see `_detect_loop`). numpy and scipy release the GIL in their
+loops, so the two threads overlap.
 
     with Node(load_config("config/default.yaml")) as node:
         out = node.process(cloud)            # NodeOutput: SupportSurfaces, ObstacleClusters
