@@ -164,7 +164,9 @@ def bench_accuracy(seqs: dict) -> list[list[object]]:
     rows = []
     for name, clouds in seqs.items():
         acc: dict[str, list] = {}
-        maps = {r: VoxelMap(MapParams(), representation=r) for r in ("stable", "recent", "centroid")}
+        maps = {
+            r: VoxelMap(MapParams(), representation=r) for r in ("stable", "recent", "centroid")
+        }
         for i, c in enumerate(clouds):
             pts = c.points.astype(np.float64)
             origin = c.sensor_pose[:3, 3]
