@@ -193,6 +193,26 @@ class KeyHash:
         self.insert(keys, vals)
 
 
+def _plane_fits(
+    count: np.ndarray, sums: np.ndarray, outer: np.ndarray, size: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Plane fits of voxel moments: count (V,), sums (V, 3) and outer (V, 6) relative to each
+    voxel's corner (``OUTER_INDEX`` order), voxel edge ``size`` m. Returns the mean (V, 3)
+    relative to the corner, eigenvalues (V, 3) ascending (m^2), the normal (V, 3) and
+    ``planar`` (V,): at least four points spread in two directions (a lidar ring leaves a line
+    of points in a voxel, whose "normal" is any direction across the line)."""
+    cnt = count.astype(np.float64)
+    mean = sums / cnt[:, None]
+    cov = np.empty((len(cnt), 3, 3))
+    for col, (a, b) in enumerate(OUTER_INDEX):  # six entries, not a loop over voxels
+        v = outer[:, col] / cnt - mean[:, a] * mean[:, b]
+        cov[:, a, b] = v
+        cov[:, b, a] = v
+    evals, normal = sym3_eigen(cov)
+    planar = (cnt >= 4) & (evals[:, 0] < 0.25 * evals[:, 1]) & (evals[:, 1] > (0.1 * size) ** 2)
+    return mean, evals, normal, planar
+
+
 class _ScanGrid(NamedTuple):
     """One scan's voxels, as :class:`~supportnode.geometry.voxels.VoxelGrid` has them: keys
     (V, 3) int64 ascending, counts (V,), starts (V,) into the voxel-sorted points, sums
@@ -657,17 +677,10 @@ class VoxelMap:
         cnt = grid.counts
         had = np.flatnonzero((n > 0) & (cnt >= 4))
         if len(had):
-            c = cnt[had].astype(np.float64)
-            seen = grid.sums[had] / c[:, None]
-            cov = np.empty((len(had), 3, 3))
-            for col, (a, b) in enumerate(OUTER_INDEX):  # six entries, not a loop over voxels
-                v = grid.outer[had, col] / c - seen[:, a] * seen[:, b]
-                cov[:, a, b] = v
-                cov[:, b, a] = v
-            evals, normal = sym3_eigen(cov)
-            # Only a plane (points spread in two directions, as in _clear) says where the kept
-            # points should lie: a lidar ring leaves a line of points in a voxel.
-            planar = (evals[:, 0] < 0.25 * evals[:, 1]) & (evals[:, 1] > (0.1 * self.size) ** 2)
+            seen, evals, normal, planar = _plane_fits(
+                cnt[had], grid.sums[had], grid.outer[had], self.size
+            )
+            # Only a plane says where the kept points should lie (not a line: one lidar ring).
             had, seen, normal, evals = had[planar], seen[planar], normal[planar], evals[planar]
             s = slots[had]
             raw = self._raw[s]  # (V, k, 3) float32, relative to the corner like seen
@@ -840,17 +853,9 @@ class VoxelMap:
 
         uniq, inv = np.unique(slot, return_inverse=True)
         corner = self._keys[uniq] * size
-        cnt = self._count[uniq].astype(np.float64)
-        mean = self._sums[uniq] / cnt[:, None]
-        cov = np.empty((len(uniq), 3, 3))
-        for col, (a, b) in enumerate(OUTER_INDEX):  # six entries, not a loop over voxels
-            v = self._outer[uniq, col] / cnt - mean[:, a] * mean[:, b]
-            cov[:, a, b] = v
-            cov[:, b, a] = v
-        evals, normal = sym3_eigen(cov)
-        # Planar needs spread in two directions: a lidar ring leaves a line of points in a
-        # voxel, whose "normal" is any direction across the line.
-        planar = (cnt >= 4) & (evals[:, 0] < 0.25 * evals[:, 1]) & (evals[:, 1] > (0.1 * size) ** 2)
+        mean, _, normal, planar = _plane_fits(
+            self._count[uniq], self._sums[uniq], self._outer[uniq], size
+        )
         c = (corner + mean)[inv]
         n_ = normal[inv]
         uu, hit = u[ray], pts[ray]
