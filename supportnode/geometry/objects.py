@@ -77,6 +77,9 @@ _SUPPORT_MIN_FRACTION = 0.5
 # Clusters of at least this many points drop the inner points of vertical lines before the
 # hull (see _column_ends); below, the grouping costs more than Qhull saves.
 _COLUMN_DEDUPE_MIN = 1000
+# Footprints of up to this many vertices get their oriented boxes in one batch (see
+# _oriented_rects), padded to the largest: at most 64 x 64 directions x vertices per cluster.
+_RECT_BATCH_MAX = 64
 # Odd 64-bit multipliers (golden ratio and a splitmix64 constant) hashing x, y bit patterns.
 _HASH_X = np.uint64(0x9E3779B97F4A7C15)
 _HASH_Y = np.uint64(0xBF58476D1CE4E5B9)
@@ -86,6 +89,9 @@ _TABLE_MAX_CELLS = 8_000_000
 # many cells in all): 2 M cells is a 6 x 5 x 2.5 m room at 3 cm, 10 MB of int32.
 _DENSE_CELLS_PER_POINT = 64
 _DENSE_MIN_CELLS = 4_000_000
+# _fill_holes first counts the holes (see _hole_count) on rasters of at least this many cells:
+# a wall cluster's footprint (a thin ring, open at a door) usually has none.
+_FILL_CHECK_MIN_CELLS = 65_536
 
 
 @dataclass
@@ -356,14 +362,16 @@ def _cluster_voxel(
         occupied[keys] = True
         vkeys = np.flatnonzero(occupied)
         nv = len(vkeys)
-        vid = np.full(cells, -1, dtype=np.int32 if nv < 2**31 else np.int64)
+        # Ids only at occupied cells (the rest is never read): no fill of the whole grid, and
+        # the neighbour tests read the 4x smaller occupancy.
+        vid = np.empty(cells, dtype=np.int32 if nv < 2**31 else np.int64)
         vid[vkeys] = np.arange(nv)
         inv = vid[keys].astype(np.int64)
         for off in _FORWARD @ strides:  # 13 vectorised look-ups, not a loop over voxels
-            nb = vid[vkeys + off]  # never out of range: the empty border absorbs every offset
-            hit = np.flatnonzero(nb >= 0)
+            nbk = vkeys + off  # never out of range: the empty border absorbs every offset
+            hit = np.flatnonzero(occupied[nbk])
             rows.append(hit)
-            cols.append(nb[hit].astype(np.int64))
+            cols.append(vid[nbk[hit]])
     else:
         vkeys, inv = np.unique(keys, return_inverse=True)
         nv = len(vkeys)
@@ -801,17 +809,23 @@ def _describe(
     # rows (see _make_cluster).
     rows = np.ascontiguousarray(in_clusters.T)
     lo, hi = mins[order], maxs[order]  # bounding boxes: the same min / max as per cluster
+    hulls = [_hulls(p, lo[cid], hi[cid]) for cid, p in enumerate(groups)]  # per cluster
+    # The hulls, never the raw points: the edge search is quadratic in the vertices.
+    rects = _oriented_rects([footprint for footprint, _ in hulls])
     clusters = [
         _make_cluster(
             cid,
-            p,
             rows[:, bounds[c] - bounds[0] : bounds[c + 1] - bounds[0]],
             lo[cid],
             hi[cid],
             None if sid < 0 else int(sid),
             height_of,
+            hull,
+            rect,
         )
-        for cid, (c, p, sid) in enumerate(zip(order, groups, sids, strict=True))  # per cluster
+        for cid, (c, sid, hull, rect) in enumerate(
+            zip(order, sids, hulls, rects, strict=True)
+        )  # per cluster
     ]
     return clusters, out
 
@@ -859,7 +873,10 @@ def _fill_holes(mask: np.ndarray, max_cells: int | None = None) -> np.ndarray:
 
     Holes are the 4-connected background components that do not touch the array's edge, as in
     binary_fill_holes, whose iterated dilation from the edge is 3-4x slower on big rasters.
+    A large raster with no hole at all (see _hole_count) is returned as it is (mask itself).
     """
+    if mask.size >= _FILL_CHECK_MIN_CELLS and _hole_count(mask) == 0:
+        return mask
     lab, n = ndimage.label(~mask)
     outside = np.zeros(n + 1, dtype=bool)
     for edge in (lab[0], lab[-1], lab[:, 0], lab[:, -1]):  # the four edges of the raster
@@ -868,6 +885,27 @@ def _fill_holes(mask: np.ndarray, max_cells: int | None = None) -> np.ndarray:
         outside |= np.bincount(lab.ravel(), minlength=n + 1) > max_cells
     outside[0] = False  # label 0 is the mask itself
     return ~outside[lab]
+
+
+def _hole_count(mask: np.ndarray) -> int:
+    """Number of holes of a 2-D bool mask, as _fill_holes counts them: 4-connected background
+    components that do not touch the edge.
+
+    By the Euler number of the 8-connected foreground (components minus holes, from the 2 x 2
+    windows of the zero-padded mask, Gray 1971): the holes are the bounded background
+    components of the padded plane, exactly those that do not touch the edge. Labelling the
+    sparse foreground of a wall cluster's footprint costs half as much as labelling its
+    background.
+    """
+    q = np.pad(mask, 1).view(np.uint8)
+    a, d = q[:-1, :-1], q[1:, 1:]
+    s = a + q[:-1, 1:] + q[1:, :-1] + d  # foreground cells in each 2 x 2 window
+    n1 = np.count_nonzero(s == 1)
+    n3 = np.count_nonzero(s == 3)
+    n_diag = np.count_nonzero((s == 2) & (a == d))  # two cells on a diagonal
+    euler = (n1 - n3 - 2 * n_diag) // 4
+    _, n_comp = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    return n_comp - euler
 
 
 def _close3(mask: np.ndarray) -> np.ndarray:
@@ -1024,29 +1062,31 @@ def _supports(groups: list[np.ndarray], lookups: list[_SupportLookup], tol: floa
 
 def _make_cluster(
     cid: int,
-    p: np.ndarray,
     rows: np.ndarray,
     lo: np.ndarray,
     hi: np.ndarray,
     sid: int | None,
     height_of: dict[int, float],
+    hull: tuple[np.ndarray, float],
+    rect: tuple[np.ndarray, float, float, float],
 ) -> Cluster:
-    """Properties of one cluster p (P, 3) standing on surface sid (heights by surface id).
+    """Properties of one cluster standing on surface sid (heights by surface id).
 
-    rows: p transposed (3, P), C-contiguous; lo, hi: (3,) bounding box of p.
+    rows: the cluster's points transposed (3, P), C-contiguous; lo, hi: (3,) their bounding
+    box; hull: footprint and volume (see _hulls); rect: oriented box of the footprint (see
+    _oriented_rect).
     """
     base = height_of[sid] if sid is not None else lo[2]
-    footprint, volume = _hulls(p, lo, hi)
-    # The hull, never the raw points: the edge search is quadratic in its vertices.
-    centre_xy, length, width, yaw = _oriented_rect(footprint)
-
+    footprint, volume = hull
+    centre_xy, length, width, yaw = rect
+    n = rows.shape[1]
     return Cluster(
         id=cid,
         surface_id=sid,
-        point_count=len(p),
+        point_count=n,
         # p.mean(axis=0) sums each column in point order (not pairwise); so does cumsum, 3x
         # faster along contiguous rows: the same bits.
-        centroid=np.cumsum(rows, axis=1)[:, -1] / len(p),
+        centroid=np.cumsum(rows, axis=1)[:, -1] / n,
         bbox_min=lo,
         bbox_max=hi,
         obb_center=np.array([centre_xy[0], centre_xy[1], (lo[2] + hi[2]) / 2]),
@@ -1119,6 +1159,57 @@ def _oriented_rect(xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
     return centre, length, width, float(a)
 
 
+def _oriented_rects(polys: list[np.ndarray]) -> list[tuple[np.ndarray, float, float, float]]:
+    """:func:`_oriented_rect` of each polygon of polys (K_i, 2), the same values.
+
+    Polygons of 3 to _RECT_BATCH_MAX vertices go in one batch: each is padded to the largest
+    K with copies of its last vertex (which change no extent) and its padded directions are
+    never chosen; every value comes from the same element-wise operations as one at a time,
+    without some 20 numpy calls per cluster. Others (degenerate, or so large that padding all
+    to them would cost more) are done one by one.
+    """
+    out: list = [None] * len(polys)
+    k = np.array([len(xy) for xy in polys], dtype=np.int64)
+    batch = np.flatnonzero((k >= 3) & (k <= _RECT_BATCH_MAX))
+    for i in np.flatnonzero((k < 3) | (k > _RECT_BATCH_MAX)):
+        out[i] = _oriented_rect(polys[i])
+    if len(batch) == 0:
+        return out
+    kb = k[batch]
+    starts = np.cumsum(kb) - kb
+    xy = np.concatenate([polys[i] for i in batch])  # (N, 2)
+    t = np.arange(int(kb.max()))
+    # Row t of polygon j, or its last vertex past the end: (B, T) flat indices into xy.
+    idx = starts[:, None] + np.minimum(t[None, :], kb[:, None] - 1)
+    nxt = np.arange(len(xy)) + 1
+    nxt[starts + kb - 1] = starts  # each polygon's last vertex closes onto its first
+    edges = np.take(xy, nxt, axis=0) - xy  # (N, 2), as np.roll(xy, -1, axis=0) - xy
+    flat = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
+    angles, cos, sin = flat[idx], np.cos(flat)[idx], np.sin(flat)[idx]  # (B, T)
+    x, y = xy[idx, 0][:, :, None], xy[idx, 1][:, :, None]  # (B, T, 1): vertex along axis 1
+    u = x * cos[:, None, :] + y * sin[:, None, :]  # (B, T, A)
+    v = -x * sin[:, None, :] + y * cos[:, None, :]
+    u_max, u_min = u.max(axis=1), u.min(axis=1)
+    v_max, v_min = v.max(axis=1), v.min(axis=1)
+    ext_u, ext_v = u_max - u_min, v_max - v_min  # (B, A)
+    score = ext_u * ext_v + 1e-12 * angles
+    score[t[None, :] >= kb[:, None]] = np.inf  # padded directions
+    best = np.argmin(score, axis=1)  # ties: the smallest angle, as _oriented_rect
+    rb = np.arange(len(batch))
+    a, c, s = angles[rb, best], cos[rb, best], sin[rb, best]
+    mu = (u_max[rb, best] + u_min[rb, best]) / 2
+    mv = (v_max[rb, best] + v_min[rb, best]) / 2
+    centre = np.stack([mu * c - mv * s, mu * s + mv * c], axis=1)
+    length, width = ext_u[rb, best], ext_v[rb, best]
+    swap = width > length
+    length, width = np.where(swap, width, length), np.where(swap, length, width)
+    a = np.where(swap, a + np.pi / 2, a)
+    a = np.where(a > np.pi / 2, a - np.pi, a)  # yaw in (-pi/2, pi/2]
+    for j, i in enumerate(batch.tolist()):
+        out[i] = (centre[j], float(length[j]), float(width[j]), float(a[j]))
+    return out
+
+
 def _column_ends(p: np.ndarray) -> np.ndarray:
     """(P,) bool: the points of p (P, 3) that may be hull vertices, as far as columns tell.
 
@@ -1130,20 +1221,25 @@ def _column_ends(p: np.ndarray) -> np.ndarray:
     hash of their x, y bits with two 16-bit radix passes (a comparison sort of 80k keys takes
     10x longer); a hash collision only splits a line's points into runs and keeps more.
     """
-    bits = np.ascontiguousarray(p[:, :2]).view(np.uint64)
-    h = ((bits[:, 0] * _HASH_X) ^ (bits[:, 1] * _HASH_Y)) >> np.uint64(32)
-    order = np.argsort((h & np.uint64(0xFFFF)).astype(np.uint16), kind="stable")
-    order = order[np.argsort((h[order] >> np.uint64(16)).astype(np.uint16), kind="stable")]
-    b = np.take(bits, order, axis=0)
+    bits = np.ascontiguousarray(p).view(np.uint64)  # (P, 3): x, y columns read in place
+    x, y = bits[:, 0], bits[:, 1]
+    h = (((x * _HASH_X) ^ (y * _HASH_Y)) >> np.uint64(32)).astype(np.uint32)
+    order = np.argsort(h.astype(np.uint16), kind="stable")  # low 16 bits, then high 16
+    order = order[np.argsort((h >> np.uint32(16)).astype(np.uint16)[order], kind="stable")]
+    xs, ys = np.take(x, order), np.take(y, order)
     new_line = np.empty(len(p), dtype=bool)
     new_line[0] = True
-    new_line[1:] = (b[1:, 0] != b[:-1, 0]) | (b[1:, 1] != b[:-1, 1])
+    np.not_equal(xs[1:], xs[:-1], out=new_line[1:])
+    new_line[1:] |= ys[1:] != ys[:-1]
     first = np.flatnonzero(new_line)
-    line = np.cumsum(new_line) - 1
+    run = np.diff(first, append=len(p))
     z = np.take(p[:, 2], order)
-    inner = (z > np.minimum.reduceat(z, first)[line]) & (z < np.maximum.reduceat(z, first)[line])
-    keep = np.ones(len(p), dtype=bool)
-    keep[order[inner]] = False
+    # Each line's extremes repeated over its run: cheaper than a cumsum of line ids and gathers.
+    inner = (z > np.repeat(np.minimum.reduceat(z, first), run)) & (
+        z < np.repeat(np.maximum.reduceat(z, first), run)
+    )
+    keep = np.empty(len(p), dtype=bool)
+    keep[order] = ~inner
     return keep
 
 
