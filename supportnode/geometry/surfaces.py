@@ -115,7 +115,8 @@ def detect_surfaces(
     elif params.method == "planar":
         surface_of_voxel, planes, stats = _grow_planar(grid, params)
         tolerance = _surface_tolerance(surface_of_voxel, planes, params)
-        absorbed = _absorb_clutter(grid, surface_of_voxel, planes, tolerance, params)
+        index = KeyIndex.build(grid.keys)
+        absorbed = _absorb_clutter(grid, index, surface_of_voxel, planes, tolerance, params)
         stats["absorbed_voxels"] = len(absorbed)
         # Pieces of one board, split by the objects on it, meet once grown around them.
         sv = np.flatnonzero(surface_of_voxel >= 0)
@@ -134,18 +135,21 @@ def detect_surfaces(
             if edges
             else 0
         )
-        sorted_labels = _label_points_planar(grid, surface_of_voxel, planes, tolerance)
+        sorted_labels = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
         vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
         stats["clutter_points_rejected"] = _reject_tilted_clutter(
-            grid, sorted_labels, vetted, params
+            grid, index, sorted_labels, vetted, params
         )
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
     surfaces, sorted_labels = _summarise(grid, sorted_labels, surface_of_voxel, params)
     if params.method == "planar":
         surfaces, sorted_labels = _drop_unfit(grid, surfaces, sorted_labels, params, sensor_origin)
-    for s in surfaces:  # outlines only of the surfaces kept: tracing one costs about a ms
-        s.outline = cells_outline(s.cells, s.cell_size)
+    # Outlines only of the surfaces kept, all traced together.
+    cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
+    outlines = cells_outlines([s.cells for s in surfaces], cell_size)
+    for s, outline in zip(surfaces, outlines, strict=True):
+        s.outline = outline
     labels = np.full(len(pts), -1, dtype=np.int32)
     if keep is None:
         labels[grid.order] = sorted_labels
@@ -320,9 +324,9 @@ def _filter_components(grid: VoxelGrid, surface_of_voxel: np.ndarray, params: Su
     keep_comp = np.zeros(len(n_cells), dtype=bool)
     order = np.argsort(comp, kind="stable")
     bounds = np.searchsorted(comp[order], np.arange(len(n_cells) + 1))
-    for c in big:  # one footprint raster per sizeable component (tens), not per voxel
-        cells = keys[order[bounds[c] : bounds[c + 1]], :2]
-        keep_comp[c] = footprint_width(cells, (vx, vy)) >= params.min_width
+    if len(big):  # footprint rasters of the sizeable components only (tens), not per voxel
+        cells = [keys[order[bounds[c] : bounds[c + 1]], :2] for c in big]
+        keep_comp[big] = footprint_widths(cells, (vx, vy)) >= params.min_width
     surface_of_voxel[sv[~keep_comp[comp]]] = -1
     return int(len(big) - keep_comp.sum())
 
@@ -462,24 +466,73 @@ def footprint_width(cells: np.ndarray, cell_size: tuple[float, float]) -> float:
 
     cells: (C, 2) int cell coordinates. The raster is upsampled twice so that even widths
     are not rounded down by a whole cell."""
-    raster, _ = rasterize_cells(cells, upsample=2, pad=1)
-    if not raster.any():
-        return 0.0
-    dist = ndimage.distance_transform_edt(raster)
-    return float(dist.max()) * min(cell_size)
+    return float(footprint_widths([cells], cell_size)[0])
 
 
-def rasterize_cells(cells: np.ndarray, upsample: int = 1, pad: int = 1):
-    """Boolean image of (C, 2) integer cells: image[iy, ix]; returns (image, origin cell)."""
-    cells = np.asarray(cells, dtype=np.int64)
-    origin = cells.min(axis=0) - pad
-    c = cells - origin
-    shape = (int(c[:, 1].max()) + 1 + pad, int(c[:, 0].max()) + 1 + pad)
-    img = np.zeros(shape, dtype=bool)
-    img[c[:, 1], c[:, 0]] = True
-    if upsample > 1:
-        img = np.repeat(np.repeat(img, upsample, axis=0), upsample, axis=1)
-    return img, origin
+def footprint_widths(cells_list: list[np.ndarray], cell_size: tuple[float, float]) -> np.ndarray:
+    """:func:`footprint_width` of each of several non-empty footprints, (S,) float64.
+
+    The footprints' rasters are stacked into a few images (:func:`_stacked_rasters`) and take
+    one distance transform each: a call costs far more than the pixels of a board. Every
+    raster has a zero margin all round, so each pixel's nearest zero lies in its own raster
+    and the distances are those of the rasters taken one by one."""
+    out = np.zeros(len(cells_list))
+    if len(cells_list) == 0:
+        return out
+    for members, img, first_row in _stacked_rasters(cells_list, upsample=2):
+        dist = ndimage.distance_transform_edt(img)
+        out[members] = np.maximum.reduceat(dist.max(axis=1), first_row[:-1])
+    return out * min(cell_size)
+
+
+# Rasters stacked into one image may leave at most this many pixels empty beyond their own
+# (a large floor is rasterised apart from the many small boards).
+_STACK_SLACK = 1 << 14
+
+
+def _stacked_rasters(cells_list: list[np.ndarray], upsample: int):
+    """Rasters of several non-empty footprints of (C, 2) integer cells, stacked along y into a
+    few zero-filled images, each as wide as its widest raster.
+
+    A footprint's raster spans its cells' bounding box and one empty cell all round, from its
+    origin cell ``min(cells) - 1``; each cell is ``upsample`` x ``upsample`` pixels. Yields
+    ``(members, image, first_row)``: the footprints' indices (int64), the stacked bool
+    image[iy, ix], and (len(members) + 1,) the first row of each raster (then the height);
+    each raster starts at column 0."""
+    count = np.array([len(c) for c in cells_list])
+    cells = np.concatenate(cells_list).astype(np.int64, copy=False)
+    bounds = np.r_[0, np.cumsum(count)[:-1]]
+    origin = np.minimum.reduceat(cells, bounds, axis=0) - 1
+    size = (np.maximum.reduceat(cells, bounds, axis=0) - origin + 2) * upsample
+    height, width = size[:, 1].tolist(), size[:, 0].tolist()
+    # Widest first: a run of rasters of similar width stacks with little waste.
+    rank = np.argsort(-size[:, 0], kind="stable")
+    owner = np.repeat(np.arange(len(cells_list)), count)
+    local = (cells - origin[owner]) * upsample
+    start = 0
+    while start < len(rank):  # one group per few footprints, each vectorised over cells
+        wide, rows, own = width[rank[start]], 0, 0
+        stop = start
+        while stop < len(rank):
+            h, w = height[rank[stop]], width[rank[stop]]
+            if stop > start and wide * (rows + h) > 2 * (own + h * w) + _STACK_SLACK:
+                break
+            rows, own, stop = rows + h, own + h * w, stop + 1
+        members = rank[start:stop]
+        first_row = np.r_[0, np.cumsum([height[m] for m in members])]
+        row_of = np.zeros(len(cells_list), dtype=np.int64)
+        row_of[members] = first_row[:-1]
+        in_group = np.zeros(len(cells_list), dtype=bool)
+        in_group[members] = True
+        sel = in_group[owner]
+        iy = local[sel, 1] + row_of[owner[sel]]
+        ix = local[sel, 0]
+        img = np.zeros((int(first_row[-1]), wide), dtype=bool)
+        for dy in range(upsample):  # upsample**2 pixels per cell
+            for dx in range(upsample):
+                img[iy + dy, ix + dx] = True
+        yield members, img, first_row
+        start = stop
 
 
 def _surface_tolerance(
@@ -497,6 +550,7 @@ def _surface_tolerance(
 
 def _absorb_clutter(
     grid: VoxelGrid,
+    index: KeyIndex,
     surface_of_voxel: np.ndarray,
     planes: _Planes,
     tolerance: np.ndarray,
@@ -507,24 +561,20 @@ def _absorb_clutter(
     A voxel holding a board and the foot of a lamp, or a floor and a wall's base, fails the
     flatness test although part of it is the surface. It joins a neighbouring surface voxel
     when enough of its points lie on that voxel's plane (carried over, not refitted, so growth
-    cannot creep up an object) and they spread over the cell (not one edge line)."""
+    cannot creep up an object) and they spread over the cell (not one edge line). index:
+    ``KeyIndex.build(grid.keys)``."""
     steps = params.absorb_steps
     if steps <= 0 or not (surface_of_voxel >= 0).any():
         return np.zeros(0, dtype=np.int64)
-    index = KeyIndex.build(grid.keys)
     offsets = layered_offsets(8)
     offsets = np.concatenate([offsets, -offsets])
     min_spread = 0.25 * np.asarray(params.voxel_size[:2])
     frontier = np.flatnonzero(surface_of_voxel >= 0)
     added = []
     for _ in range(steps):  # a few rings of voxels, each step vectorised
-        src, dst = [], []
-        for off in offsets:
-            j = index.neighbours(frontier, off, grid.keys)
-            ok = j >= 0
-            src.append(frontier[ok])
-            dst.append(j[ok])
-        src, dst = np.concatenate(src), np.concatenate(dst)
+        j = index.neighbours_many(frontier, offsets, grid.keys)
+        ok = j >= 0
+        src, dst = np.broadcast_to(frontier, j.shape)[ok], j[ok]
         free = (surface_of_voxel[dst] < 0) & (grid.counts[dst] > params.p_min)
         src, dst = src[free], dst[free]
         if len(src) == 0:
@@ -628,28 +678,25 @@ def _voxels_to_vet(
 
 def _reject_tilted_clutter(
     grid: VoxelGrid,
+    index: KeyIndex,
     sorted_labels: np.ndarray,
     vetted: np.ndarray,
     params: SurfaceParams,
 ) -> int:
     """Unlabel, in place, surface points of the ``vetted`` voxels whose k-NN normal is tilted.
 
-    sorted_labels: (N,) labels in the grid's voxel order. The report's normal filter, run only
-    where it matters (its own suggested improvement): within the point tolerance of a board
-    lie the foot of the panel behind it, the bottom rim of the objects on it and the top of
-    its side faces; their neighbourhoods are not level (:func:`_voxels_to_vet`). Returns
-    points unlabelled."""
+    sorted_labels: (N,) labels in the grid's voxel order; index: ``KeyIndex.build(grid.keys)``.
+    The report's normal filter, run only where it matters (its own suggested improvement):
+    within the point tolerance of a board lie the foot of the panel behind it, the bottom rim
+    of the objects on it and the top of its side faces; their neighbourhoods are not level
+    (:func:`_voxels_to_vet`). Returns points unlabelled."""
     if len(vetted) == 0:
         return 0
     # Neighbours come from the vetted voxels, those beside them in their layer (a wall's
     # foot, an object's rim) and those just above and below.
-    index = KeyIndex.build(grid.keys)
-    around = [vetted]
     beside = [(dx, dy, 0) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
-    for off in np.array([*beside, (0, 0, 1), (0, 0, -1)], dtype=np.int64):
-        j = index.neighbours(vetted, off, grid.keys)
-        around.append(j[j >= 0])
-    vox = np.unique(np.concatenate(around))
+    j = index.neighbours_many(vetted, [*beside, (0, 0, 1), (0, 0, -1)], grid.keys)
+    vox = np.unique(np.concatenate([vetted, j[j >= 0]]))
     n_pts = grid.counts[vox]
     first = np.cumsum(n_pts) - n_pts
     pos = np.repeat(grid.starts[vox] - first, n_pts) + np.arange(n_pts.sum())
@@ -673,6 +720,7 @@ def _reject_tilted_clutter(
 
 def _label_points_planar(
     grid: VoxelGrid,
+    index: KeyIndex,
     surface_of_voxel: np.ndarray,
     planes: _Planes,
     tol_by_comp: np.ndarray,
@@ -681,13 +729,16 @@ def _label_points_planar(
 
     A point is on a surface when it lies within tolerance of the plane of a surface voxel
     in its own column: its own voxel, or the one just below or above (a noisy or
-    layer-straddling surface spills into neighbouring layers)."""
+    layer-straddling surface spills into neighbouring layers). index:
+    ``KeyIndex.build(grid.keys)``."""
     n = len(grid.order)
     sorted_labels = np.full(n, -1, dtype=np.int64)
     sv = np.flatnonzero(surface_of_voxel >= 0)
     if len(sv) == 0:
         return sorted_labels
-    index = KeyIndex.build(grid.keys[sv])
+    below, above = index.neighbours_many(
+        np.arange(len(grid.counts)), [(0, 0, -1), (0, 0, 1)], grid.keys
+    )
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
     lx, ly, lz = grid.local
     best = np.full(n, np.inf)
@@ -696,11 +747,12 @@ def _label_points_planar(
             vsel = sv
             t = sv
         else:
-            hit = index.find(grid.keys + [0, 0, dz])
+            hit = below if dz < 0 else above
             vsel = np.flatnonzero(hit >= 0)
+            vsel = vsel[surface_of_voxel[hit[vsel]] >= 0]
             if len(vsel) == 0:
                 continue
-            t = sv[hit[vsel]]
+            t = hit[vsel]
         # The plane of surface voxel t as z = A + bx*lx + by*ly in voxel vsel's local frame.
         nrm = planes.normal[t]
         bx, by = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
@@ -752,10 +804,11 @@ def _summarise(
 
     sorted_labels: (N,) component of each point in the grid's voxel order; returns the
     surfaces and the points' surface ids in that order."""
-    on = sorted_labels >= 0
-    if not on.any():
+    at = np.flatnonzero(sorted_labels >= 0)
+    if len(at) == 0:
         return [], np.full(len(sorted_labels), -1, dtype=np.int64)
-    present = np.bincount(sorted_labels[on])
+    lab = sorted_labels[at]
+    present = np.bincount(lab)
     comps = np.flatnonzero(present)
     s_count = len(comps)
     remap = np.full(len(present) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
@@ -763,18 +816,24 @@ def _summarise(
     # Runs of one (voxel, surface) are reduced first; surfaces are then sums over their runs.
     # Most surface voxels hold points of one surface only: their run is the whole voxel, whose
     # moments the grid already has. Only mixed voxels are reduced point by point.
-    labels_of_voxel = sorted_labels[grid.starts]
-    mismatch = sorted_labels != np.repeat(labels_of_voxel, grid.counts)
-    pure = np.add.reduceat(mismatch, grid.starts) == 0
-    pure_vox = np.flatnonzero(pure & (labels_of_voxel >= 0))
-    mixed = on & np.repeat(~pure, grid.counts)
-    g = remap[sorted_labels[mixed]]
-    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[mixed]
+    # Only the labelled points are read (a few of all): a voxel is pure when all its points
+    # are labelled, with one surface.
+    at_vox = np.searchsorted(grid.starts, at, side="right") - 1
+    first = np.flatnonzero(np.r_[True, at_vox[1:] != at_vox[:-1]])
+    vv = at_vox[first]
+    n_on = np.diff(np.append(first, len(at)))
+    pure = (n_on == grid.counts[vv]) & (
+        np.minimum.reduceat(lab, first) == np.maximum.reduceat(lab, first)
+    )
+    pure_vox = vv[pure]
+    mixed = np.repeat(~pure, n_on)
+    g = remap[lab[mixed]]
+    vox = at_vox[mixed]
     cut = np.empty(len(g), dtype=bool)
     cut[:1] = True
     cut[1:] = (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])
     run = np.flatnonzero(cut)
-    local = [c[mixed] for c in grid.local]
+    local = [c[at[mixed]] for c in grid.local]
 
     def reduce_runs(ufunc: np.ufunc, values: list[np.ndarray], pure_values: np.ndarray):
         if len(run) == 0:  # reduceat needs at least one run
@@ -782,7 +841,7 @@ def _summarise(
         mixed_values = np.stack([ufunc.reduceat(v, run) for v in values], axis=1)
         return np.concatenate([pure_values, mixed_values])
 
-    run_g = np.concatenate([remap[labels_of_voxel[pure_vox]], g[run]])
+    run_g = np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], g[run]])
     run_vox = np.concatenate([pure_vox, vox[run]])
     run_n = np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))])
     corner = grid.keys[run_vox] * grid.size
@@ -790,11 +849,16 @@ def _summarise(
     r_outer = reduce_runs(
         np.add, [local[a] * local[b] for a, b in OUTER_INDEX], grid.outer[pure_vox]
     )
-    # Extremes of the pure voxels: one contiguous pass over all voxels, then picked.
-    v_min = np.stack([np.minimum.reduceat(c, grid.starts) for c in grid.local], axis=1)
-    v_max = np.stack([np.maximum.reduceat(c, grid.starts) for c in grid.local], axis=1)
-    r_min = reduce_runs(np.minimum, local, v_min[pure_vox]) + corner
-    r_max = reduce_runs(np.maximum, local, v_max[pure_vox]) + corner
+    # Extremes of the pure voxels from their own points.
+    if len(pure_vox):
+        pure_local = [c[at[~mixed]] for c in grid.local]
+        bounds = np.cumsum(grid.counts[pure_vox]) - grid.counts[pure_vox]
+        v_min = np.stack([np.minimum.reduceat(c, bounds) for c in pure_local], axis=1)
+        v_max = np.stack([np.maximum.reduceat(c, bounds) for c in pure_local], axis=1)
+    else:
+        v_min = v_max = np.zeros((0, 3))
+    r_min = reduce_runs(np.minimum, local, v_min) + corner
+    r_max = reduce_runs(np.maximum, local, v_max) + corner
 
     counts = np.bincount(run_g, weights=run_n, minlength=s_count)
     abs_sum = r_sum + corner * run_n[:, None]
@@ -837,6 +901,7 @@ def _summarise(
     rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
     new_id = np.empty(s_count, dtype=np.int64)
     new_id[rank] = np.arange(s_count)
+    width = footprint_widths(cells_of, (vx, vy))
     surfaces = []
     for sid, c in enumerate(rank):  # one entry per surface
         cells = cells_of[c]
@@ -855,7 +920,7 @@ def _summarise(
                 voxel_count=int(vcount[c]),
                 cells=cells,
                 cell_size=(vx, vy),
-                width=footprint_width(cells, (vx, vy)),
+                width=float(width[c]),
             )
         )
     new_id = np.append(new_id, -1)
@@ -1103,28 +1168,48 @@ def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.
     Returns (K, 2) float64 rings without the closing vertex: counter-clockwise rings bound the
     surface, clockwise rings are holes. The largest ring comes first. Cells that touch only at
     a corner give separate rings."""
-    if len(cells) == 0:
-        return []
-    img, origin = rasterize_cells(cells, pad=1)
-    filled = img
-    # Directed boundary edges with the surface on their left, in vertex coordinates (x, y).
-    edges = []
-    jy, ix = np.nonzero(filled & ~np.roll(filled, 1, axis=0))  # nothing below: bottom edge
-    edges.append(np.stack([ix, jy, ix + 1, jy], 1))
-    jy, ix = np.nonzero(filled & ~np.roll(filled, -1, axis=1))  # nothing right
-    edges.append(np.stack([ix + 1, jy, ix + 1, jy + 1], 1))
-    jy, ix = np.nonzero(filled & ~np.roll(filled, -1, axis=0))  # nothing above
-    edges.append(np.stack([ix + 1, jy + 1, ix, jy + 1], 1))
-    jy, ix = np.nonzero(filled & ~np.roll(filled, 1, axis=1))  # nothing left
-    edges.append(np.stack([ix, jy + 1, ix, jy], 1))
-    e = np.concatenate(edges)
-    nxt = _next_edge(e)
+    return cells_outlines([cells], cell_size)[0]
+
+
+def cells_outlines(
+    cells_list: list[np.ndarray], cell_size: tuple[float, float]
+) -> list[list[np.ndarray]]:
+    """:func:`cells_outline` of each of several footprints, traced together: the fixed cost
+    of the steps (a ms a footprint) is paid once."""
+    out: list[list[np.ndarray]] = [[] for _ in cells_list]
+    full = [i for i, c in enumerate(cells_list) if len(c)]
+    if not full:
+        return out
+    cells_list = [cells_list[i] for i in full]
+    # Directed boundary edges with the surface on their left, in vertex coordinates (x, y)
+    # of each footprint's own raster, ordered as one footprint's edges alone would be: by
+    # footprint, then side, then row and column.
+    # (np.roll wraps around, onto the empty border of a raster.)
+    sides = (
+        (0, 1, lambda x, y: (x, y, x + 1, y)),  # nothing below: bottom edge
+        (1, -1, lambda x, y: (x + 1, y, x + 1, y + 1)),  # nothing right
+        (0, -1, lambda x, y: (x + 1, y + 1, x, y + 1)),  # nothing above
+        (1, 1, lambda x, y: (x, y + 1, x, y)),  # nothing left
+    )
+    edges, owner = [], []
+    for members, filled, first_row in _stacked_rasters(cells_list, upsample=1):
+        for side, (axis, shift, edge) in enumerate(sides):
+            jy, ix = np.nonzero(filled & ~np.roll(filled, shift, axis=axis))
+            m = np.searchsorted(first_row, jy, side="right") - 1
+            edges.append(np.stack(edge(ix, jy - first_row[m]), 1))
+            owner.append(members[m] * 4 + side)
+    owner = np.concatenate(owner)
+    by = np.argsort(owner, kind="stable")
+    e = np.concatenate(edges)[by]
+    owner = owner[by] // 4
+    nxt = _next_edge(e, owner)
     n = len(e)
     graph = coo_matrix((np.ones(n, dtype=np.int8), (np.arange(n), nxt)), shape=(n, n))
     _, ring = connected_components(graph, directed=False)
     # Walk order without walking: cut each ring after its smallest edge index, then rank every
     # edge by its distance to the cut (pointer jumping: log2(E) vectorised rounds).
-    root = np.full(ring.max() + 1, n, dtype=np.int64)
+    n_rings = int(ring.max()) + 1
+    root = np.full(n_rings, n, dtype=np.int64)
     np.minimum.at(root, ring, np.arange(n))
     succ = np.where(nxt == root[ring], -1, nxt)
     dist = (succ >= 0).astype(np.int64)
@@ -1136,21 +1221,40 @@ def cells_outline(cells: np.ndarray, cell_size: tuple[float, float]) -> list[np.
         dist = dist + np.where(ok, dist[hop], 0)
         succ = np.where(ok, succ[hop], -1)
     order = np.lexsort((-dist, ring))
-    bounds = np.searchsorted(ring[order], np.arange(ring.max() + 2))
-    rings = []
-    for k in range(ring.max() + 1):  # one entry per ring (outline and holes)
-        r = e[order[bounds[k] : bounds[k + 1]], :2].astype(np.float64)
-        rings.append((_drop_collinear(r) + origin) * np.asarray(cell_size))
-    rings.sort(key=lambda r: -abs(_ring_area(r)))
-    return rings
+    bounds = np.searchsorted(ring[order], np.arange(n_rings + 1))
+    # Collinear vertices dropped (the cross product of the edges in and out is exact on
+    # integers), every ring at once: its previous and next vertex wrap around within it.
+    v = e[order, :2].astype(np.float64)
+    ring_of = ring[order]
+    at = np.arange(n)
+    prev = np.where(at == bounds[ring_of], bounds[ring_of + 1] - 1, at - 1)
+    after = np.where(at == bounds[ring_of + 1] - 1, bounds[ring_of], at + 1)
+    cross = (v[:, 0] - v[prev, 0]) * (v[after, 1] - v[:, 1]) - (v[:, 1] - v[prev, 1]) * (
+        v[after, 0] - v[:, 0]
+    )
+    keep = cross != 0
+    origin = np.stack([c.min(axis=0) for c in cells_list]).astype(np.int64) - 1
+    v = (v + origin[owner[order]]) * np.asarray(cell_size)
+    kept_bounds = np.r_[0, np.cumsum(np.add.reduceat(keep, bounds[:-1]))]
+    v = v[keep]
+    rings_of: list[list[np.ndarray]] = [[] for _ in cells_list]
+    for k, s in enumerate(owner[root].tolist()):  # one entry per ring (outline and holes)
+        rings_of[s].append(v[kept_bounds[k] : kept_bounds[k + 1]])
+    for i, rings in zip(full, rings_of, strict=True):
+        if len(rings) > 1:
+            rings.sort(key=lambda r: -abs(_ring_area(r)))
+        out[i] = rings
+    return out
 
 
-def _next_edge(e: np.ndarray) -> np.ndarray:
-    """Successor of each directed boundary edge (E, 4: x0 y0 x1 y1): the edge leaving its end
-    vertex, preferring the left turn so that cells touching at a corner make separate rings."""
-    span = int(e[:, [1, 3]].max()) + 2  # vertex key x * span + y is unique since y < span
-    start = e[:, 0] * span + e[:, 1]
-    end = e[:, 2] * span + e[:, 3]
+def _next_edge(e: np.ndarray, owner: np.ndarray) -> np.ndarray:
+    """Successor of each directed boundary edge (E, 4: x0 y0 x1 y1) of footprint ``owner``
+    (E,): the edge of its footprint leaving its end vertex, preferring the left turn so that
+    cells touching at a corner make separate rings."""
+    span = int(e[:, [1, 3]].max()) + 2  # vertex key (owner, x, y) is unique: y < span ...
+    wide = int(e[:, [0, 2]].max()) + 2  # ... and x < wide
+    start = (owner * wide + e[:, 0]) * span + e[:, 1]
+    end = (owner * wide + e[:, 2]) * span + e[:, 3]
     by_start = np.argsort(start, kind="stable")
     first = np.searchsorted(start[by_start], end)
     count = np.searchsorted(start[by_start], end, side="right") - first
@@ -1162,15 +1266,6 @@ def _next_edge(e: np.ndarray) -> np.ndarray:
         return d[:, 0] * d[j, 1] - d[:, 1] * d[j, 0]
 
     return np.where((count > 1) & (left(b) > left(a)), b, a)
-
-
-def _drop_collinear(ring: np.ndarray) -> np.ndarray:
-    prev = np.roll(ring, 1, axis=0)
-    nxt = np.roll(ring, -1, axis=0)
-    cross = (ring[:, 0] - prev[:, 0]) * (nxt[:, 1] - ring[:, 1]) - (ring[:, 1] - prev[:, 1]) * (
-        nxt[:, 0] - ring[:, 0]
-    )
-    return ring[cross != 0]
 
 
 def _ring_area(ring: np.ndarray) -> float:
