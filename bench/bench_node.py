@@ -2,7 +2,7 @@
 drops and memory at twice the input rate, accuracy and id switches on simulated sequences.
 
     python bench/bench_node.py [--scene kitchen] [--frames 30] [--lidar os128|vlp16]
-                               [--only stages,e2e,growth,rate,ids]
+                               [--only stages,e2e,growth,rate,ids] [--map-points recent]
 
 Prints one JSON object per part. The lidar is the simulator's os128 (128 x 1024 = 131,072
 rays; a scan holds as many points as rays hit something).
@@ -21,6 +21,7 @@ import numpy as np
 from supportnode.client import Publisher, Subscriber, SupportSurfaces, pose_from_matrix
 from supportnode.msgs import PointCloud
 from supportnode.node.allocator import retain_freed_memory
+from supportnode.node.map import VoxelMap
 from supportnode.node.node import Node
 from supportnode.sim import Lidar, load_scene, parse_scene, poses_for
 from supportnode.sim.scene import scene_path
@@ -179,12 +180,15 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0) -> dict:
     }
 
 
-def ids(scene_name: str, frames: int) -> dict:
+def ids(scene_name: str, frames: int, map_points: str = "stable") -> dict:
     """Accuracy and id switches on a simulated sequence. A ground-truth surface is found when
     a published surface lies within 3 cm of its height and 1 m of its centre (the largest such
     one counts); a ground-truth object when a published cluster's centroid is within 10 cm of
-    its centroid in x, y and in z (z too: on a shelf, objects on different boards share x, y). An id switch: the id found for one ground-truth item changes between
-    two scans where it is found."""
+    its centroid in x, y and in z (z too: on a shelf, objects on different boards share x, y).
+    An id switch: the id found for one ground-truth item changes between two scans where it is
+    found. Then the same poses are scanned again: on that static second pass, how many new
+    obstacle ids appear per scan (any cluster: what a planner sees appear). ``map_points``: the
+    map's representation (stable, recent)."""
     scene = scene_by_name(scene_name)
     sc = scans(scene, Lidar.preset("os128"), poses_for(scene, frames), seed=0, frame="sensor")
     gt_s: dict[int, list[np.ndarray]] = {}
@@ -201,7 +205,7 @@ def ids(scene_name: str, frames: int) -> dict:
     s_ids: dict[int, list[int]] = {k: [] for k in gt_s}
     o_ids: dict[int, list[int]] = {k: [] for k in gt_o}
     s_found, o_found = [], []
-    with Node() as node:
+    with Node(map_factory=lambda: VoxelMap(None, representation=map_points)) as node:
         for i, s in enumerate(sc):
             out = node.process(_cloud(s, 0.1 * i, i + 1))
             hits = 0
@@ -228,6 +232,10 @@ def ids(scene_name: str, frames: int) -> dict:
                     o_ids[k].append(max(near, key=lambda c: c.point_count).id)
                     hits += 1
             o_found.append(hits / max(len(gt_o), 1))
+        new_ids = [
+            len(node.process(_cloud(s, 0.1 * (frames + i), frames + i + 1)).new_ids["obstacles"])
+            for i, s in enumerate(sc)
+        ]
 
     def switches(d: dict[int, list[int]]) -> int:
         return sum(int(np.sum(np.diff(v) != 0)) for v in d.values() if len(v) > 1)
@@ -243,6 +251,8 @@ def ids(scene_name: str, frames: int) -> dict:
         "object_recall_last": round(o_found[-1], 3),
         "object_recall_mean": round(float(np.mean(o_found)), 3),
         "object_id_switches": switches(o_ids),
+        "map_points": map_points,
+        "new_obstacle_ids_per_scan_second_pass": round(float(np.mean(new_ids)), 2),
     }
 
 
@@ -252,6 +262,9 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--lidar", default="os128", help="simulated lidar preset (os128, vlp16)")
     ap.add_argument("--only", default="stages,e2e,growth,rate,ids")
+    ap.add_argument(
+        "--map-points", default="stable", help="ids: the map's representation (stable, recent)"
+    )
     ap.add_argument(
         "--default-malloc",
         action="store_true",
@@ -274,7 +287,7 @@ def main() -> None:
         print(json.dumps({"growth": growth(sc)}), flush=True)
     if "ids" in parts:
         for name in ("table_chairs", "kitchen", "shelf"):
-            print(json.dumps({"ids": ids(name, args.frames)}), flush=True)
+            print(json.dumps({"ids": ids(name, args.frames, args.map_points)}), flush=True)
 
 
 if __name__ == "__main__":

@@ -249,9 +249,10 @@ class VoxelMap:
     representation: points handed to detection by :meth:`points`:
         ``"stable"`` keeps the first ``keep_points`` raw points a voxel receives (float32
         relative to its corner, evenly spread over the scans' points in it) and renews them
-        only when rays pass through the voxel (what was there moved): on a static scene the
-        detection input, and so every cluster and id, stays the same from scan to scan, and
-        changes only where the map changes;
+        only when a scan shows that what the voxel holds has changed (see
+        :meth:`_keep_first`; a voxel that rays see through loses evidence and goes instead):
+        on a static scene the detection input, and so every cluster and id, stays the same
+        from scan to scan, and changes only where the map changes;
         ``"recent"`` keeps the ``keep_points`` newest raw points of every voxel (a ring: every
         scan that hits a voxel replaces them, so clusters of partly seen objects flicker);
         ``"centroid"`` gives one point per voxel, the mean of everything merged into it.
@@ -666,12 +667,15 @@ class VoxelMap:
         """Fill the free places of each voxel's ``keep_points`` kept points, in order, with
         evenly spaced picks (input order: along a lidar's rings) from this scan's points in
         it; voxels already full keep theirs unless this scan shows that what they hold has
-        changed, and then its points replace them. Rays passing through catch most changes
-        (see :meth:`_clear`), but not a voxel that still holds something: an object lifted off
-        a board leaves the board's points in the voxels it stood in. Changed: this scan's points
-        in the voxel make a plane (at least four, spread in two directions) and a kept point
-        lies off it by more than a fifth of a voxel and three times their rms distance to it
-        (their noise). Fewer points, or a line of them (one lidar ring), say nothing."""
+        changed, and then its points replace them. Rays passing through remove what left
+        (see :meth:`_clear`), but not from a voxel that still holds something: an object
+        lifted off a board leaves the board's points in the voxels it stood in. (Emptying the
+        points of a voxel as soon as one ray sees through it made clusters at the edges of
+        objects flicker with the viewpoint: evidence decides, as for "recent".) Changed: this
+        scan's points in the voxel make a plane (at least four, spread in two directions) and
+        a kept point lies off it by more than a fifth of a voxel and three times their rms
+        distance to it (their noise). Fewer points, or a line of them (one lidar ring), say
+        nothing."""
         k = self.keep_points
         n = self._raw_n[slots]
         cnt = grid.counts
@@ -883,11 +887,7 @@ class VoxelMap:
         # a voxel may be noise; several are a clear view through it).
         hit_slots, rays_through = np.unique(slot[through], return_counts=True)
         self._evidence[hit_slots] -= np.where(rays_through >= 3, 2, 1).astype(np.int32)
-        left = self._evidence[hit_slots] > 0
-        if self.representation == "stable":
-            # Seen through: what the kept points show has moved; the next hits renew them.
-            self._raw_n[hit_slots[left]] = 0
-        gone = hit_slots[~left]
+        gone = hit_slots[self._evidence[hit_slots] <= 0]
         self._stats["cleared"] += len(gone)
         return self._remove(gone)
 
