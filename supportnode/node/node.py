@@ -192,8 +192,8 @@ class Node(Closing):
     """The support-surface node (see the module docstring).
 
     params: the whole configuration (`DetectParams`; its ``node`` section for the node).
-    voxel_map, surface_tracker, cluster_tracker: injected parts (defaults: `VoxelMap`,
-    `SurfaceTracker`, `ClusterTracker`); made again by `reset`, so pass factories if needed.
+    map_factory: makes the map (default: `VoxelMap` of ``node.map``); called again by `reset`
+    (a source that restarted), so it is a factory, not a map.
     incremental: detect only on the region a scan touched when that equals a full recompute.
     context: ZeroMQ context for the sockets (default: the shared instance).
     """
