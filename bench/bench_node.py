@@ -263,7 +263,10 @@ def main() -> None:
     ap.add_argument("--lidar", default="os128", help="simulated lidar preset (os128, vlp16)")
     ap.add_argument("--only", default="stages,e2e,growth,rate,ids")
     ap.add_argument(
-        "--map-points", default="stable", help="ids: the map's representation (stable, recent)"
+        "--map-points",
+        default="stable",
+        choices=("stable", "recent"),
+        help="ids: the map's representation",
     )
     ap.add_argument(
         "--default-malloc",

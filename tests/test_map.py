@@ -277,3 +277,8 @@ def test_stable_points_repeat_on_a_static_scene_and_renew_where_it_changed(rng):
     assert (bottom(m.points())[:, 2] > 0.52).any()  # the box's foot shares the board's voxels
     m.integrate(board(), EYE, 0.1, in_map_frame=True)  # the box is gone: only the board
     assert np.abs(bottom(m.points())[:, 2] - 0.51).max() < 1e-6
+
+
+def test_unknown_representation_is_a_clear_error():
+    with pytest.raises(InputError, match=r"representation must be one of .*stable"):
+        VoxelMap(representation="newest")
