@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from supportnode.errors import InputError
-from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.linalg import sym3_eigen_entries
 from supportnode.geometry.transform import transform_points
 from supportnode.geometry.voxels import OUTER_INDEX, argsort_keys, voxelize
 from supportnode.params import MapParams
@@ -39,6 +39,7 @@ _OFFS = np.array([1 << (_BITS_XY - 1), 1 << (_BITS_XY - 1), 1 << (_BITS_Z - 1)],
 _SHIFTS = (_BITS_XY + _BITS_Z, _BITS_Z, 0)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: scatters spatially close keys
 _EMPTY, _TOMB = -1, -2
+_MAGIC = float(1 << 52)  # x + 2^52 holds an integer 0 <= x < 2^52 as its mantissa bits
 _FILTER_BITS = 3  # KeyHash.filter has 2^3 cells per table position
 REPRESENTATIONS = ("stable", "recent", "centroid")
 _CHUNK = 1 << 15  # ray samples per chunk in VoxelMap._clear (~256 KB per temporary)
@@ -55,17 +56,26 @@ _SEE_OFF = 1.0
 # The noise floor of a scan: this percentile of its dense voxels' own estimates (see
 # _plane_noise).
 _NOISE_PERCENTILE = 90.0
+# The 27 steps from a voxel to itself and its neighbours, x slowest.
+_STEPS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
 
 
 def pack_keys(keys: np.ndarray) -> np.ndarray:
     """(N, 3) int64 voxel keys -> (N,) non-negative int64; raises InputError out of range."""
-    k = np.asarray(keys, dtype=np.int64).reshape(-1, 3) + _OFFS
-    if k.size and ((k < 0).any() or (k >= 2 * _OFFS).any()):
-        raise InputError(
-            "points too far from the map origin for this voxel size "
-            f"(|key| must stay below 2^{_BITS_XY - 1} in x, y and 2^{_BITS_Z - 1} in z)"
-        )
-    return (k[:, 0] << _SHIFTS[0]) | (k[:, 1] << _SHIFTS[1]) | k[:, 2]
+    k = np.asarray(keys, dtype=np.int64).reshape(-1, 3)
+    # Column by column, shifted in place: numpy reduces and combines the short axis of an
+    # (N, 3) array several times slower, and (N, 3) temporaries cost their pages.
+    out = np.zeros(len(k), np.int64)
+    for a in range(3):  # three axes
+        col = k[:, a] + _OFFS[a]
+        if len(col) and (col.min() < 0 or col.max() >= 2 * _OFFS[a]):
+            raise InputError(
+                "points too far from the map origin for this voxel size "
+                f"(|key| must stay below 2^{_BITS_XY - 1} in x, y and 2^{_BITS_Z - 1} in z)"
+            )
+        col <<= _SHIFTS[a]
+        out |= col
+    return out
 
 
 def unpack_keys(packed: np.ndarray) -> np.ndarray:
@@ -145,7 +155,8 @@ class KeyHash:
         """Indices into (Q,) packed keys of those that may be present (the others are not):
         one lookup in ``filter`` per query, for many queries of which few are present (ray
         samples in free space); :meth:`find_present` settles the rest."""
-        return np.flatnonzero(np.take(self.filter, self._home(q, self._fshift)))
+        # Compared to zero first: numpy finds the nonzero entries of bool 5x faster than uint8.
+        return np.flatnonzero(np.take(self.filter, self._home(q, self._fshift)) != 0)
 
     def find_present(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Indices into (Q,) packed keys of those present, ascending, and their slots.
@@ -215,18 +226,19 @@ def _plane_fits(
     ``planar`` (V,): at least four points spread in two directions (a lidar ring leaves a line
     of points in a voxel, whose "normal" is any direction across the line)."""
     cnt = count.astype(np.float64)
-    mean = sums / cnt[:, None]
-    cov = np.empty((len(cnt), 3, 3))
-    for col, (a, b) in enumerate(OUTER_INDEX):  # six entries, not a loop over voxels
-        v = outer[:, col] / cnt - mean[:, a] * mean[:, b]
-        cov[:, a, b] = v
-        cov[:, b, a] = v
-    evals, normal = sym3_eigen(cov)
+    mean = np.empty((len(cnt), 3))
+    for a in range(3):  # three axes: a (V, 1) broadcast costs 3x
+        np.divide(sums[:, a], cnt, out=mean[:, a])
+    # The covariance's six entries as (V,) columns: what sym3_eigen would take out of an
+    # (V, 3, 3) stack, without building it.
+    evals, normal = sym3_eigen_entries(
+        *(outer[:, col] / cnt - mean[:, a] * mean[:, b] for col, (a, b) in enumerate(OUTER_INDEX))
+    )
     planar = (cnt >= 4) & (evals[:, 0] < 0.25 * evals[:, 1]) & (evals[:, 1] > (0.1 * size) ** 2)
     return mean, evals, normal, planar
 
 
-def _plane_noise(smallest: np.ndarray, count: np.ndarray) -> np.ndarray:
+def _plane_noise(smallest: np.ndarray, count: np.ndarray, among: np.ndarray) -> np.ndarray:
     """(V,) metres: the noise of a scan's points about the planes fitted in its voxels, from
     the smallest covariance eigenvalue (V,) m^2 of each voxel's count (V,) points. Each voxel's
     own estimate, unbiased (three of its degrees of freedom went into the fit), but never
@@ -234,25 +246,34 @@ def _plane_noise(smallest: np.ndarray, count: np.ndarray) -> np.ndarray:
     plane through four or five points says little about the noise, and a sensor's noise is
     much the same from one voxel to the next. Not the median: a surface near a voxel's face
     is cut in two by it, and each half spreads less than the noise (a half-normal: 0.6 of it),
-    so the median of a noisy scan's voxels says about half its noise."""
+    so the median of a noisy scan's voxels says about half its noise. among: (V,) bool, the
+    voxels that make the percentile (the planes; the others' estimates are still returned)."""
     n = count.astype(np.float64)
     var = np.maximum(smallest, 0.0) * n / np.maximum(n - 3.0, 1.0)
-    dense = var[n >= 8]
+    dense = var[(n >= 8) & among]
     floor = float(np.percentile(dense, _NOISE_PERCENTILE)) if len(dense) else 0.0
     return np.sqrt(np.maximum(var, floor))
 
 
 class _ScanGrid(NamedTuple):
     """One scan's voxels, as :class:`~supportnode.geometry.voxels.VoxelGrid` has them: keys
-    (V, 3) int64 ascending, counts (V,), starts (V,) into the voxel-sorted points, sums
-    (V, 3), outer (V, 6) and local (three (N,) voxel-sorted offsets from the corner)."""
+    (V, 3) int64 ascending, counts (V,), starts (V,) into the voxel-sorted points, moments
+    (V, 9): sums (V, 3) then outer (V, 6), and local (three (N,) voxel-sorted offsets from
+    the corner)."""
 
     keys: np.ndarray
     counts: np.ndarray
     starts: np.ndarray
-    sums: np.ndarray
-    outer: np.ndarray
+    moments: np.ndarray
     local: list[np.ndarray]
+
+    @property
+    def sums(self) -> np.ndarray:
+        return self.moments[:, :3]
+
+    @property
+    def outer(self) -> np.ndarray:
+        return self.moments[:, 3:]
 
 
 @dataclass
@@ -356,13 +377,19 @@ class VoxelMap:
         self._packed = np.zeros(capacity, np.int64)
         self._alive = np.zeros(capacity, bool)
         self._count = np.zeros(capacity, np.int64)
-        self._sums = np.zeros((capacity, 3))
-        self._outer = np.zeros((capacity, 6))
+        # Sums and outer products side by side: a scan merges them with one gather and one
+        # scatter of (V, 9) rows instead of two of each.
+        self._moments = np.zeros((capacity, 9))
+        self._sums = self._moments[:, :3]
+        self._outer = self._moments[:, 3:]
         self._last_seen = np.zeros(capacity)
         self._last_scan = np.full(capacity, -1, np.int64)
         self._evidence = np.zeros(capacity, np.int32)
         k = max(self.keep_points, 1)
         self._raw = np.zeros((capacity, k, 3), np.float32)
+        # The kept points in the map frame (corner + raw, float64), written with _raw: points()
+        # is then one gather of rows, not a gather, a repeat of the corners and an add.
+        self._pts = np.zeros((capacity, k, 3))
         self._raw_n = np.zeros(capacity, np.int32)
         self._raw_head = np.zeros(capacity, np.int32)
 
@@ -379,12 +406,12 @@ class VoxelMap:
                 "_packed",
                 "_alive",
                 "_count",
-                "_sums",
-                "_outer",
+                "_moments",
                 "_last_seen",
                 "_last_scan",
                 "_evidence",
                 "_raw",
+                "_pts",
                 "_raw_n",
                 "_raw_head",
             )
@@ -404,7 +431,7 @@ class VoxelMap:
 
     def _remove(self, slots: np.ndarray) -> np.ndarray:
         """Free (R,) distinct live slots; returns their (R, 3) keys."""
-        keys = self._keys[slots].copy()
+        keys = self._keys[slots]  # a fancy-indexed gather: already a copy
         self.version += int(len(slots) > 0)
         self._hash.delete(self._packed[slots])
         self._alive[slots] = False
@@ -470,15 +497,19 @@ class VoxelMap:
         self._stats["scans"] += 1
         self._stats["points_merged"] += npts
 
-        slots = self._merge(cols, float(stamp), origin)
+        slots, keys = self._merge(cols, float(stamp), origin)
         removed = []
         if self.params.clear_free_space and npts:
             removed.append(self._clear(cols, origin))
         removed.append(self._maybe_forget(float(stamp), origin))
-        hit = slots[self._alive[slots]]
+        # The scan's keys are those of its slots: no gather from the store unless clearing
+        # or forgetting removed some of them.
+        alive = self._alive[slots]
+        if not alive.all():
+            keys = keys[alive]
         lo = np.array([c.min() for c in cols]) if npts else np.full(3, np.inf)
         hi = np.array([c.max() for c in cols]) if npts else np.full(3, -np.inf)
-        return Touched(self._keys[hit].copy(), np.concatenate(removed), lo, hi)
+        return Touched(keys, np.concatenate(removed), lo, hi)
 
     def points(self, keys: np.ndarray | None = None) -> np.ndarray:
         """Representative points for detection: (P, 3) float64, map frame, metres.
@@ -487,6 +518,11 @@ class VoxelMap:
         skipped), None for the whole map. "stable" and "recent": up to ``keep_points`` raw
         points per voxel; "centroid": one point per voxel.
         """
+        if keys is None and self.representation != "centroid":
+            # Every slot at once, in slot order: a dead slot keeps no points (_remove empties
+            # it), so one comparison over the store replaces finding the live slots.
+            have = np.arange(self._raw.shape[1]) < self._raw_n[:, None]
+            return np.take(self._pts.reshape(-1, 3), np.flatnonzero(have), axis=0)
         return self._points_of(self._slots(keys))
 
     def centroids(self, max_points: int | None = None) -> np.ndarray:
@@ -538,16 +574,16 @@ class VoxelMap:
         return self._points_of(slots)
 
     def _points_of(self, slots: np.ndarray) -> np.ndarray:
-        corner = self._keys[slots] * self.size
         if self.representation == "centroid":
+            corner = self._keys[slots] * self.size
             return corner + self._sums[slots] / self._count[slots, None]
         k = self._raw.shape[1]
-        n = self._raw_n[slots]
         # Rings fill from slot 0, so the kept points of a voxel are its first n columns: one
-        # mask over (V, k) picks them in row order (a gather per (row, column) pair costs 3x).
-        have = np.arange(k)[None, :] < n[:, None]
-        raw = np.take(self._raw, slots, axis=0)[have]
-        return np.repeat(corner, n, axis=0) + raw
+        # mask over (V, k) gives their rows in order, and one gather of those rows the points
+        # (a boolean mask over (V, k, 3) costs 2-3x).
+        have = np.arange(k) < self._raw_n[slots][:, None]
+        rows = (slots[:, None] * k + np.arange(k))[have]
+        return np.take(self._pts.reshape(-1, 3), rows, axis=0)
 
     def voxels(self, keys: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Per-voxel state (copies), of the given (Q, 3) keys or of all voxels.
@@ -611,7 +647,8 @@ class VoxelMap:
         dims = (hi - lo + 1.0) if not far else np.full(3, np.inf)
         if float(np.prod(dims)) > max(8 * n, 1 << 20):
             grid = voxelize(np.stack(cols, axis=1), np.full(3, size))  # raises when too far
-            return _ScanGrid(grid.keys, grid.counts, grid.starts, grid.sums, grid.outer, grid.local)
+            moments = np.concatenate([grid.sums, grid.outer], axis=1)
+            return _ScanGrid(grid.keys, grid.counts, grid.starts, moments, grid.local)
         # Linear key of each point's voxel in the scan's box, in float64 (exact: integers
         # below 2^53) and in place, converted once.
         lin_f = self._buffer("lin_f", n, np.float64)
@@ -655,19 +692,21 @@ class VoxelMap:
             off = np.multiply(kcols[a], size, out=kcols[a])
             np.subtract(cols[a], off, out=off)
             local.append(np.take(off, order, out=self._buffer(f"local{a}", n, np.float64)))
-        sums = np.empty((nvox, 3))
+        moments = np.empty((nvox, 9))
         for a in range(3):  # three axes
-            sums[:, a] = np.add.reduceat(local[a], starts)
-        outer = np.empty((nvox, 6))
+            moments[:, a] = np.add.reduceat(local[a], starts)
         prod = self._buffer("prod", n, np.float64)
         for col, (a, b) in enumerate(OUTER_INDEX):  # six entries
-            outer[:, col] = np.add.reduceat(np.multiply(local[a], local[b], out=prod), starts)
-        return _ScanGrid(keys, counts, starts, sums, outer, local)
+            moments[:, 3 + col] = np.add.reduceat(np.multiply(local[a], local[b], out=prod), starts)
+        return _ScanGrid(keys, counts, starts, moments, local)
 
-    def _merge(self, cols: list[np.ndarray], stamp: float, origin: np.ndarray) -> np.ndarray:
-        """Add the scan's voxel moments to the store; returns the (V,) slots hit."""
+    def _merge(
+        self, cols: list[np.ndarray], stamp: float, origin: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Add the scan's voxel moments to the store; returns the (V,) slots hit and their
+        (V, 3) keys (a new array, not a view of the store)."""
         if len(cols[0]) == 0:
-            return np.zeros(0, np.int64)
+            return np.zeros(0, np.int64), np.zeros((0, 3), np.int64)
         grid = self._voxelize(cols)
         packed = pack_keys(grid.keys)
         slots = self._hash.find(packed)
@@ -680,15 +719,16 @@ class VoxelMap:
             self._packed[fresh] = packed[new]
             self._alive[fresh] = True
             self._count[fresh] = 0
-            self._sums[fresh] = 0.0
-            self._outer[fresh] = 0.0
+            self._moments[fresh] = 0.0
             self._evidence[fresh] = 0
             self._raw_n[fresh] = 0
             self._raw_head[fresh] = 0
         # The scan's voxels are distinct, so fancy-indexed += adds exactly once per slot.
         self._count[slots] += grid.counts
-        self._sums[slots] += grid.sums
-        self._outer[slots] += grid.outer
+        # Gather, add, scatter: the same sums as fancy-indexed +=, at half its cost on rows.
+        moments = np.take(self._moments, slots, axis=0)
+        moments += grid.moments
+        self._moments[slots] = moments
         self._last_seen[slots] = stamp
         self._last_scan[slots] = self._scans
         self._evidence[slots] = np.minimum(self._evidence[slots] + 1, self.max_evidence)
@@ -698,7 +738,7 @@ class VoxelMap:
             self.version += 1
             if self.keep_points:
                 self._keep_recent(grid, slots)
-        return slots
+        return slots, grid.keys
 
     def _keep_first(
         self, grid: _ScanGrid, packed: np.ndarray, slots: np.ndarray, origin: np.ndarray
@@ -721,23 +761,33 @@ class VoxelMap:
         cnt = grid.counts
         had = np.flatnonzero((n > 0) & (cnt >= 4))
         if len(had):
+            moments = np.take(grid.moments, had, axis=0)
+            count = cnt[had]
             seen, evals, normal, planar = _plane_fits(
-                cnt[had], grid.sums[had], grid.outer[had], self.size
+                count, moments[:, :3], moments[:, 3:], self.size
             )
             # Only a plane says where the kept points should lie (not a line: one lidar ring).
-            had, seen, normal, evals = had[planar], seen[planar], normal[planar], evals[planar]
+            # Most voxels are planes: the tests below run on all (each voxel's result is its
+            # own), and only the end keeps the planes, rather than gathering them first.
             s = slots[had]
             raw = self._raw[s]  # (V, k, 3) float32, relative to the corner like seen
-            dist = np.abs(
-                raw[:, :, 0] * normal[:, 0, None]
-                + raw[:, :, 1] * normal[:, 1, None]
-                + raw[:, :, 2] * normal[:, 2, None]
-                - np.einsum("ij,ij->i", seen, normal)[:, None]
-            )
+            # In float64 from the start (what mixing float32 into float64 products does anyway,
+            # once rather than per product), in place.
+            wide = raw.astype(np.float64)
+            dist = wide[:, :, 0] * normal[:, 0, None]
+            dist += wide[:, :, 1] * normal[:, 1, None]
+            dist += wide[:, :, 2] * normal[:, 2, None]
+            dist -= np.einsum("ij,ij->i", seen, normal)[:, None]
+            np.abs(dist, out=dist)
             dist[np.arange(k)[None, :] >= n[had, None]] = 0.0  # places not filled yet
-            noise = _plane_noise(evals[:, 0], cnt[had])
+            noise = _plane_noise(evals[:, 0], count, planar)
             tol = np.maximum(0.2 * self.size, 3.5 * noise)
-            off = np.flatnonzero(dist.max(axis=1) > tol)
+            # Column by column: numpy reduces the short axis of a (V, k) array several times
+            # slower.
+            most = dist[:, 0].copy()
+            for j in range(1, k):  # keep_points columns
+                np.maximum(most, dist[:, j], out=most)
+            off = np.flatnonzero(planar & (most > tol))
             seen_through = self._seen_through(
                 grid, packed, had[off], raw[off], dist[off], origin, 3.0 * noise[off]
             )
@@ -760,6 +810,7 @@ class VoxelMap:
         for a in range(3):  # three axes
             vals[:, a] = grid.local[a][pick]
         self._raw.reshape(-1, 3)[dest] = vals
+        self._pts.reshape(-1, 3)[dest] = (self._keys[s] * self.size)[rep] + vals
         self._raw_n[s] += take.astype(np.int32)
 
     def _seen_through(
@@ -790,7 +841,7 @@ class VoxelMap:
         if len(vox) == 0:
             return np.zeros(0, bool)
         size = self.size
-        step = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        step = _STEPS
         nb_keys = grid.keys[vox][:, None, :] + step[None, :, :]  # (C, 27, 3)
         nb_packed = pack_keys(nb_keys.reshape(-1, 3))
         at = np.minimum(np.searchsorted(packed, nb_packed), len(packed) - 1)
@@ -843,6 +894,7 @@ class VoxelMap:
         for a in range(3):  # three axes
             vals[:, :, a] = grid.local[a][pick]
         self._raw[s] = vals
+        self._pts[s] = (self._keys[s] * self.size)[:, None, :] + vals
         self._raw_n[s] = k
         # Voxels with fewer points keep all of them (the even spacing picks every one) at
         # the ring positions after the head.
@@ -859,45 +911,51 @@ class VoxelMap:
         for a in range(3):  # three axes
             vals[:, a] = grid.local[a][pick]
         self._raw.reshape(-1, 3)[dest] = vals
+        self._pts.reshape(-1, 3)[dest] = (self._keys[s] * self.size)[np.nonzero(use)[0]] + vals
         head += take
         head[head >= k] -= k
         self._raw_head[s] = head
         self._raw_n[s] = np.minimum(self._raw_n[s] + take, k)
 
-    def _sample_keys(
-        self, u: np.ndarray, n: np.ndarray, ends: np.ndarray, origin: np.ndarray
-    ) -> np.ndarray:
-        """Packed keys of the samples of rays with unit directions u (R, 3), n (R,) samples
-        each ending at ``ends`` (cumsum of n): sample j at ``origin + u * (j + 0.5) * size``.
+    def _sample_keys(self, u: np.ndarray, t: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """(J, R) packed keys of the samples ``origin + u * t`` of rays with unit directions
+        u (3, R) (a row per axis) at distances t (J,) metres: sample j of every ray, in row j.
+        A view of scratch memory, overwritten by the next call.
 
-        The samples outnumber the rays ~50:1, so every pass over them counts: t is built in
-        float64 (integers < 2^53 are exact, so this equals converting the integer j), and the
-        keys axis by axis in reused buffers, with np.repeat of the direction rather than a
-        gather by a per-sample ray index, and no (S, 3) temporaries. Samples lie between the
-        origin and in-range hits, so their keys are in range too."""
+        The samples outnumber the rays ~50:1, so every pass over them counts. Rays of similar
+        length go together (the caller ignores the samples past each ray's end), so a row
+        is one distance times a row of directions: numpy's fast scalar-times-vector loop, and
+        no direction repeated per sample; a row per ray instead (~50 samples) would pay
+        numpy's ~100 ns per row of a broadcast many times over. The keys are built axis by
+        axis in reused buffers, with no (S, 3) temporaries. Samples lie between the origin
+        and in-range hits, so their keys are in range too (those past a ray's end, within
+        the reach of the block's longest ray, may not be: garbage then, never used)."""
         size = self.size
-        m = int(ends[-1]) if len(ends) else 0
-        t = np.arange(m, dtype=np.float64)
-        t -= np.repeat((ends - n).astype(np.float64), n)
-        t += 0.5
-        t *= size
-        # x and y keys are combined in float64 first: (kx + off) * 2^22 + ky + off < 2^44 is
-        # exact, and one conversion and shift of it replace two.
-        fx, buf = np.empty(m), np.empty(m)
+        shape = (len(t), u.shape[1])
+        m = shape[0] * shape[1]
+        fx = self._buffer("sample_x", m, np.float64).reshape(shape)
+        buf = self._buffer("sample_y", m, np.float64).reshape(shape)
+        # The keys are integers below 2^53 in float64, so exact; converted not by a cast
+        # (numpy's float to int64 is a slow scalar loop) but by adding 2^52, which puts the
+        # integer in the low mantissa bits, exactly as the cast would give it: x and y,
+        # (kx + off) * 2^22 + ky + off < 2^44, end up shifted into place (the exponent bits
+        # shift out), z is masked out.
         for a, out in ((0, fx), (1, buf), (2, buf)):  # three axes
-            np.multiply(np.repeat(u[:, a], n), t, out=out)
+            np.multiply(t[:, None], u[a], out=out)
             out += origin[a]
             out /= size
             np.floor(out, out=out)
             if a == 1:
                 fx *= float(1 << _BITS_XY)
                 fx += buf
-                fx += float(_OFFS[0] << _BITS_XY | _OFFS[1])
-                packed = fx.astype(np.int64)
-                packed <<= _SHIFTS[1]
-        buf += float(_OFFS[2])
-        packed |= buf.astype(np.int64)
-        return packed
+                fx += float(_OFFS[0] << _BITS_XY | _OFFS[1]) + _MAGIC
+                packed = fx.view(np.uint64)
+                packed <<= np.uint64(_SHIFTS[1])
+        buf += float(_OFFS[2]) + _MAGIC
+        z = buf.view(np.uint64)
+        z &= np.uint64((1 << _BITS_Z) - 1)
+        packed |= z
+        return packed.view(np.int64)
 
     def _clear(self, cols: list[np.ndarray], origin: np.ndarray) -> np.ndarray:
         """Free-space clearing along the scan's rays; returns the removed (R, 3) keys.
@@ -923,43 +981,58 @@ class VoxelMap:
             pts = np.stack(cols, axis=1)
         d = pts - origin
         dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-        ok = dist > 3 * size
-        d, dist, pts = d[ok], dist[ok], pts[ok]
-        u = d / dist[:, None]
         # Nothing is kept beyond the radius: marching further (a stray return kilometres away)
         # would only cost time.
         rng_ = np.minimum(dist, self.params.radius + 2 * size)
         # One sample per voxel length: a ray may skip a corner it clips, which only delays
-        # clearing there; half steps would double the cost for little.
+        # clearing there; half steps would double the cost for little. Rays of three voxels
+        # or less get none.
         step = size
         n = np.maximum(np.floor((rng_ - 2 * size) / step).astype(np.int64), 0)
-        ends = np.cumsum(n)
-        # Samples go in chunks of whole rays whose temporaries stay in cache (2-3x faster than
-        # one pass over all samples, which are ~50 per ray); each chunk is looked up at once.
-        total = int(ends[-1]) if len(n) else 0
-        cuts = np.searchsorted(ends, np.arange(_CHUNK, total, _CHUNK), side="right")
-        bounds = [0, *np.unique(cuts[cuts < len(n)]).tolist(), len(n)]
-        # Each chunk only sifts out the samples that may meet a stored voxel (a few %): the
+        n = np.where(dist > 3 * size, n, 0)
+        # Longest rays first: what follows does not depend on the order of the rays, and rays
+        # of similar length then go together in dense (samples, rays) blocks that waste few
+        # samples past the rays' ends (~5 %); rays without samples go last and are dropped.
+        # (Ray lengths are a few hundred samples at most: 16-bit keys sort in one radix pass.)
+        top = int(n.max()) if len(n) else 0
+        if top < 1 << 16:
+            order = np.argsort((top - n).astype(np.uint16), kind="stable")
+        else:
+            order = np.argsort(-n, kind="stable")
+        order = order[: np.count_nonzero(n)]
+        n, d, dist, pts = n[order], d[order], dist[order], pts[order]
+        u = d / dist[:, None]
+        rows = np.ascontiguousarray(u.T)
+        # t as the samples had it: (j + 0.5) * size, j exact in float64.
+        t = np.arange(int(n[0]) if len(n) else 0, dtype=np.float64)
+        t += 0.5
+        t *= size
+        # Blocks of about _CHUNK samples, whose temporaries stay in cache (2-3x faster than one
+        # pass over all samples, which are ~50 per ray); each block is looked up at once.
+        bounds = [0]
+        while bounds[-1] < len(n):  # a few blocks per scan
+            bounds.append(min(bounds[-1] + max(_CHUNK // int(n[bounds[-1]]), 1), len(n)))
+        # Each block only sifts out the samples that may meet a stored voxel (a few %): the
         # probe loop then runs once for all of them (its iterations cost microseconds each).
-        samples, keys = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
-        for r0, r1 in pairwise(bounds):  # a few chunks per scan
-            s0 = int(ends[r0 - 1]) if r0 else 0
-            packed = self._sample_keys(u[r0:r1], n[r0:r1], ends[r0:r1] - s0, origin)
+        # Consecutive samples of one ray often share a voxel, and each (ray, voxel) counts
+        # once: per axis the key is monotone along a ray (so is rounding), so a ray cannot
+        # come back to a voxel it left; the first sample of each run of equal keys along a
+        # ray stands for the run (all of it passes the filters below, or none).
+        rays, keys = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+        for r0, r1 in pairwise(bounds):
+            width = r1 - r0
+            packed = self._sample_keys(rows[:, r0:r1], t[: n[r0]], origin).reshape(-1)
             idx = self._hash.maybe_present(packed)
-            samples.append(idx + s0)
-            keys.append(packed[idx])
+            j, ray = np.divmod(idx, width)
+            ray += r0
+            key = packed[idx]
+            first = (j < n[ray]) & ((j == 0) | (packed[np.maximum(idx - width, 0)] != key))
+            rays.append(ray[first])
+            keys.append(key[first])
         found, slot = self._hash.find_present(np.concatenate(keys))
-        sample = np.concatenate(samples)[found]
+        ray = np.concatenate(rays)[found]
         met = self._last_scan[slot] != self._scans  # hit by this scan: seen, not seen through
-        sample, slot = sample[met], slot[met]
-        # Consecutive samples of one ray often share a voxel: count each (ray, voxel) once.
-        # Per axis the key is monotone along a ray (so is rounding), so a ray cannot come
-        # back to a voxel it left and duplicates are adjacent; samples between
-        # two of them share their key, so they survived the filters above too.
-        ray = np.searchsorted(ends, sample, side="right")
-        first = np.ones(len(slot), bool)
-        first[1:] = (slot[1:] != slot[:-1]) | (ray[1:] != ray[:-1])
-        ray, slot = ray[first], slot[first]
+        ray, slot = ray[met], slot[met]
         if len(slot) == 0:
             return np.zeros((0, 3), np.int64)
 
