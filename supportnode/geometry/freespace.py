@@ -116,10 +116,12 @@ def _free_space(
         coarse[cells[:, 0] - c0[0], cells[:, 1] - c0[1]] = True
         ix = np.floor(xc / vx).astype(np.int64) - c0[0]
         iy = np.floor(yc / vy).astype(np.int64) - c0[1]
-        okx = (ix >= 0) & (ix < coarse.shape[0])
-        oky = (iy >= 0) & (iy < coarse.shape[1])
-        sub = coarse[np.ix_(ix[okx], iy[oky])].T  # (rows y, cols x)
-        surf[np.ix_(np.flatnonzero(oky), np.flatnonzero(okx))] = sub
+        # The fine cells inside the coarse extent: one run per axis (ix, iy never decrease).
+        xs = np.flatnonzero((ix >= 0) & (ix < coarse.shape[0]))
+        ys = np.flatnonzero((iy >= 0) & (iy < coarse.shape[1]))
+        if len(xs) and len(ys):
+            sub = coarse.take(ix[xs], axis=0).take(iy[ys], axis=1).T  # (rows y, cols x)
+            surf[ys[0] : ys[-1] + 1, xs[0] : xs[-1] + 1] = sub
 
     objects = np.zeros((h, w), dtype=bool)
     if object_xy is not None:
@@ -147,9 +149,10 @@ def _free_space(
         # it is blocked, and for a cell inside, the blocked cell on that ring straight towards
         # any blocked cell outside is no further. The same distances, on a smaller raster.
         r0, r1, c0, c1 = _box(free)
-        dist = ndimage.distance_transform_edt(free[r0 - 1 : r1 + 1, c0 - 1 : c1 + 1])
-        best = dist.max()
-        rows, cols = np.nonzero(dist == best)
+        d2 = _squared_edt(free[r0 - 1 : r1 + 1, c0 - 1 : c1 + 1])
+        top = d2.max()
+        best = np.sqrt(np.float64(top))  # the transform's maximum, as it computes it
+        rows, cols = np.nonzero(d2 == top)
         rows += r0 - 1  # raster indices, row-major as np.nonzero over the whole raster
         cols += c0 - 1
         # Of the equally good cells (e.g. the 2x2 centre of an even square), the one nearest
@@ -194,10 +197,17 @@ def free_space_all(
     # free_space does with the clusters' points, their occupied cells, does not depend on the
     # grouping): one gather of the points on surfaces, not a sort and gather of all clusters.
     slot = {s.id: k for k, s in reversed(list(enumerate(surfs)))}  # first surface of an id
-    of_cluster = np.array([slot.get(cl.surface_id, len(surfs)) for cl in clusters] + [len(surfs)])
-    key = of_cluster[lab]  # label -1 (last entry): no surface
-    order = _stable_argsort(key)
-    bounds = np.searchsorted(key[order], np.arange(len(surfs) + 1))
+    of_cluster = np.array(
+        [slot.get(cl.surface_id, len(surfs)) for cl in clusters] + [len(surfs)], dtype=np.int32
+    )
+    # Only the points of objects on a surface are sorted (labels -1 read the last entry):
+    # the same runs, in the same order, as a stable sort of all points' keys.
+    key = of_cluster[lab]
+    on = np.flatnonzero(key < len(surfs))
+    key = key[on]
+    by_key = _stable_argsort(key)
+    order = on[by_key]
+    bounds = np.searchsorted(key[by_key], np.arange(len(surfs) + 1))
     out = []
     for s in surfs:  # one iteration per surface
         on_this = [cl for cl in clusters if cl.surface_id == s.id]
@@ -214,6 +224,22 @@ def _stable_argsort(key: np.ndarray) -> np.ndarray:
     if len(key) and key.max() < np.iinfo(np.uint16).max:
         return np.argsort(key.astype(np.uint16), kind="stable")
     return np.argsort(key, kind="stable")
+
+
+def _squared_edt(mask: np.ndarray) -> np.ndarray:
+    """Squared ``ndimage.distance_transform_edt`` of a 2-D bool mask with some False cell,
+    (H, W) integers (cells): from the feature transform, without the float64 passes of the
+    distances (the nearest cells and their squared distances are exact integers, and the
+    square root keeps their order and equality)."""
+    ft = ndimage.distance_transform_edt(mask, return_distances=False, return_indices=True)
+    if max(mask.shape) >= 1 << 15:  # squares of int32 offsets could overflow
+        ft = ft.astype(np.int64)
+    dr = ft[0] - np.arange(mask.shape[0], dtype=ft.dtype)[:, None]
+    dc = ft[1] - np.arange(mask.shape[1], dtype=ft.dtype)[None, :]
+    dr *= dr
+    dc *= dc
+    dr += dc
+    return dr
 
 
 def _box(mask: np.ndarray) -> tuple[int, int, int, int]:

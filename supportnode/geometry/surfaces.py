@@ -10,12 +10,11 @@ Two methods share one result type:
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -113,9 +112,9 @@ def detect_surfaces(
         surface_of_voxel, stats = _grow_seed(grid, params)
         sorted_labels = np.repeat(surface_of_voxel, grid.counts)
     elif params.method == "planar":
-        surface_of_voxel, planes, stats = _grow_planar(grid, params)
-        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
         index = KeyIndex.build(grid.keys)
+        surface_of_voxel, planes, stats = _grow_planar(grid, index, params)
+        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
         absorbed = _absorb_clutter(grid, index, surface_of_voxel, planes, tolerance, params)
         stats["absorbed_voxels"] = len(absorbed)
         # Pieces of one board, split by the objects on it, meet once grown around them.
@@ -123,12 +122,13 @@ def detect_surfaces(
         edges: list = []
         if len(sv):
             surface_of_voxel[sv] = _connect(
-                grid.keys[sv], planes.mean[sv], planes.normal[sv], params, edges=edges
+                grid, index, sv, planes.mean[sv], planes.normal[sv], params, edges=edges
             )
             tolerance = _surface_tolerance(surface_of_voxel, planes, params)
         # Size limits apply to what a surface became: a board seen between objects is a
         # narrow strip until it has grown under and around them.
-        stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params)
+        widths: dict[bytes, float] = {}
+        stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params, widths)
         # A cutting board or a plate joins the worktop it lies on: cut it out again.
         stats["plateau_voxels"] = (
             _drop_raised_plateaus(grid, surface_of_voxel, planes, tolerance, sv, *edges, params)
@@ -142,9 +142,13 @@ def detect_surfaces(
         )
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
-    surfaces, sorted_labels = _summarise(grid, sorted_labels, surface_of_voxel, params)
+    # Surface ids by the points' labels so far (lut[label], -1 for -1): one gather of all
+    # points at the end, not one a stage.
+    surfaces, lut = _summarise(
+        grid, sorted_labels, surface_of_voxel, params, widths if params.method == "planar" else None
+    )
     if params.method == "planar":
-        surfaces, sorted_labels = _drop_unfit(grid, surfaces, sorted_labels, params, sensor_origin)
+        surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
     # Outlines only of the surfaces kept, all traced together.
     cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
@@ -152,10 +156,10 @@ def detect_surfaces(
         s.outline = outline
     labels = np.full(len(pts), -1, dtype=np.int32)
     if keep is None:
-        labels[grid.order] = sorted_labels
+        labels[grid.order] = lut[sorted_labels]
     else:
         used_labels = np.empty(len(used), dtype=np.int32)
-        used_labels[grid.order] = sorted_labels
+        used_labels[grid.order] = lut[sorted_labels]
         labels[keep] = used_labels
     stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
     if keep is not None:
@@ -189,8 +193,14 @@ def _normal_filter_mask(pts: np.ndarray, params: SurfaceParams) -> np.ndarray:
 
 
 def _components(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Connected-component label of each of n nodes given undirected edges."""
-    graph = coo_matrix((np.ones(len(src), dtype=np.int8), (src, dst)), shape=(n, n))
+    """Connected-component label of each of n nodes given undirected edges (components
+    numbered by their first node, whatever the order of the edges)."""
+    # The CSR arrays directly, in the dtypes csgraph works in: from a COO matrix, scipy's
+    # conversions and checks cost twice the search on graphs of a few thousand edges.
+    indptr = np.zeros(n + 1, dtype=np.int32)
+    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
+    order = np.argsort(src, kind="stable")
+    graph = csr_matrix((np.ones(len(src)), dst[order].astype(np.int32), indptr), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
     return comp
 
@@ -219,15 +229,20 @@ class _Planes:
 
 
 def _voxel_fits(
-    grid: VoxelGrid, idx: np.ndarray, max_tilt_deg: float
+    grid: VoxelGrid,
+    idx: np.ndarray,
+    max_tilt_deg: float,
+    entries: list[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Plane fits of the voxels ``idx`` from their moments: unit normals (z >= 0),
     (len(idx), 3), and rms distances of the points to the plane, (len(idx),) m.
+    entries: ``grid.covariance_entries(idx)`` when the caller has them.
 
     Points that are (nearly) collinear, such as one lidar ring crossing a voxel, leave the
     plane undetermined; such a voxel is taken as horizontal exactly when its line is."""
     # Covariance entries as columns: no (M, 3, 3) stack to build and take apart again.
-    entries = grid.covariance_entries(idx)
+    if entries is None:
+        entries = grid.covariance_entries(idx)
     evals, normal = sym3_eigen_entries(*entries)
     evals = np.maximum(evals, 0.0)
     normal = np.where(normal[:, 2:3] < 0, -normal, normal)
@@ -242,23 +257,66 @@ def _voxel_fits(
     return normal, roughness
 
 
+def _maybe_level(
+    entries: list[np.ndarray], max_tilt_deg: float, max_roughness: float
+) -> np.ndarray:
+    """(M,) bool, True for every voxel whose fit by :func:`_voxel_fits` from its covariance
+    ``entries`` (six (M,) columns in ``OUTER_INDEX`` order, m^2) can be level within
+    ``max_tilt_deg`` and ``max_roughness`` m rough: a few false positives, no false negative.
+
+    Necessary conditions, each with a slack far above the fit's round-off:
+    - a plane: its normal n, within the tilt of z, for eigenvalue l <= r^2; the z row of
+      the eigen equation gives var_z - l <= |(a02, a12)| tan(tilt), and l is at most the
+      least eigenvalue of the xy block (interlacing);
+    - a level line: var_z <= sin^2(tilt) times its largest eigenvalue, which is at most the
+      largest absolute row sum g;
+    - a fit too degenerate to give a normal (reported as +z): two equal least eigenvalues,
+      so the least eigenvalues of the three 2x2 diagonal blocks, which lie between, agree."""
+    if not 0.0 <= max_tilt_deg < 90.0:
+        return np.ones(len(entries[0]), dtype=bool)
+    a00, a11, a22, a01, a02, a12 = entries
+    tilt = np.radians(max_tilt_deg)
+    var_max = max_roughness**2
+    g = np.maximum(np.abs(a00) + np.abs(a01) + np.abs(a02), np.abs(a01) + np.abs(a11) + np.abs(a12))
+    g = np.maximum(g, np.abs(a02) + np.abs(a12) + np.abs(a22))
+    slack = 1e-4 * g + 1e-5 * np.sqrt(g) + 1e-30
+
+    def mu0(x: np.ndarray, y: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        return 0.5 * (x + y) - np.sqrt(0.25 * (x - y) ** 2 + xy * xy)
+
+    m_xy, m_xz, m_yz = mu0(a00, a11, a01), mu0(a00, a22, a02), mu0(a11, a22, a12)
+    c = np.sqrt(a02 * a02 + a12 * a12)
+    plane = a22 <= np.minimum(var_max, m_xy) + c * (np.tan(tilt) * (1 + 1e-4)) + slack
+    line = a22 <= np.sin(tilt) ** 2 * (1 + 1e-4) * np.maximum(g * (1 + 1e-4), 1e-30) + slack
+    hi = np.maximum(np.maximum(m_xy, m_xz), m_yz)
+    lo = np.minimum(np.minimum(m_xy, m_xz), m_yz)
+    return plane | line | ((hi <= var_max + slack) & (hi - lo <= slack))
+
+
 def _voxel_means(grid: VoxelGrid, idx: np.ndarray) -> np.ndarray:
     """(len(idx), 3) centroids of the voxels ``idx``, metres (as ``grid.means()[idx]``)."""
     return grid.keys[idx] * grid.size + grid.sums[idx] / grid.counts[idx, None]
 
 
-def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _Planes, dict]:
-    """Components of flat, near-horizontal voxels whose planes continue into each other."""
-    dense = np.flatnonzero(grid.counts > max(params.p_min, 2))
-    normal, roughness = _voxel_fits(grid, dense, params.max_tilt_deg)
+def _grow_planar(
+    grid: VoxelGrid, index: KeyIndex, params: SurfaceParams
+) -> tuple[np.ndarray, _Planes, dict]:
+    """Components of flat, near-horizontal voxels whose planes continue into each other.
+    index: ``KeyIndex.build(grid.keys)``."""
+    dense = grid.counts > max(params.p_min, 2)
+    # The eigen solution costs ~20x the bound that rules most voxels out (walls, objects).
+    # Entries of all voxels (nearly all are dense): no gathers of the moments.
+    entries = grid.covariance_entries()
+    fit = np.flatnonzero(dense & _maybe_level(entries, params.max_tilt_deg, params.max_roughness))
+    normal, roughness = _voxel_fits(grid, fit, params.max_tilt_deg, [e[fit] for e in entries])
     ok = (normal[:, 2] >= np.cos(np.radians(params.max_tilt_deg))) & (
         roughness <= params.max_roughness
     )
-    cand = dense[ok]
+    cand = fit[ok]
     # Centroids of the candidates only (a few percent of the voxels).
     cplanes = _Planes(_voxel_means(grid, cand), normal[ok], roughness[ok])
     # Seeds for the clutter growth; gaps are bridged once, in the final connection.
-    comp = _connect(grid.keys[cand], cplanes.mean, cplanes.normal, params, bridge=False)
+    comp = _connect(grid, index, cand, cplanes.mean, cplanes.normal, params, bridge=False)
     surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
     surface_of_voxel[cand] = comp
     all_planes = _Planes(
@@ -270,7 +328,7 @@ def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _P
     all_planes.normal[cand] = cplanes.normal
     all_planes.roughness[cand] = cplanes.roughness
     stats = {
-        "dense_voxels": len(dense),
+        "dense_voxels": int(np.count_nonzero(dense)),
         "candidate_voxels": len(cand),
         "components": int(comp.max()) + 1 if len(comp) else 0,
     }
@@ -278,19 +336,32 @@ def _grow_planar(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, _P
 
 
 def _connect(
-    keys: np.ndarray,
+    grid: VoxelGrid,
+    index: KeyIndex,
+    voxels: np.ndarray,
     mean: np.ndarray,
     normal: np.ndarray,
     params: SurfaceParams,
     bridge: bool = True,
     edges: list | None = None,
 ) -> np.ndarray:
-    """Component of each (M, 3)-keyed voxel: neighbours join when each one's plane, extended
+    """Component of each of the (M,) ``voxels`` of the grid (``index``: its KeyIndex), with
+    planes (M, 3) ``mean`` and ``normal``: neighbours join when each one's plane, extended
     to the other's point, meets it within max_step (a step, a wall top beside a table or a
     shelf board above another does not join). The joined pairs of adjacent voxels (src,
-    dst), bridged ones left out, are appended to ``edges`` when given."""
-    index = KeyIndex.build(keys)
-    src, dst = index.neighbour_pairs(keys, layered_offsets(params.connectivity))
+    dst: positions in ``voxels``), bridged ones left out, are appended to ``edges`` when
+    given."""
+    # Neighbours looked up in the grid's own index, then kept when among ``voxels``: the
+    # pairs (and their order) of a KeyIndex of these voxels alone, without building one.
+    position = np.full(len(grid.counts) + 1, -1, dtype=np.int64)  # last entry: absent (-1)
+    position[voxels] = np.arange(len(voxels))
+
+    def pairs(offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        j = position[index.neighbours_many(voxels, offsets, grid.keys)].ravel()
+        hit = np.flatnonzero(j >= 0)
+        return hit % max(len(voxels), 1), j[hit]
+
+    src, dst = pairs(layered_offsets(params.connectivity))
     n_adjacent = len(src)
     if bridge and params.bridge_cells > 0:
         # Sparse scan lines far from a lidar leave empty cells between the rings of a floor.
@@ -305,21 +376,28 @@ def _connect(
             ],
             dtype=np.int64,
         )
-        far_src, far_dst = index.neighbour_pairs(keys, far)
+        far_src, far_dst = pairs(far)
         src, dst = np.concatenate([src, far_src]), np.concatenate([dst, far_dst])
     d = mean[dst] - mean[src]
-    gap_src = np.abs(np.einsum("ij,ij->i", d, normal[src])) / normal[src, 2]
-    gap_dst = np.abs(np.einsum("ij,ij->i", d, normal[dst])) / normal[dst, 2]
+    n_src, n_dst = normal[src], normal[dst]
+    gap_src = np.abs(np.einsum("ij,ij->i", d, n_src)) / n_src[:, 2]
+    gap_dst = np.abs(np.einsum("ij,ij->i", d, n_dst)) / n_dst[:, 2]
     joined = np.maximum(gap_src, gap_dst) <= params.max_step
     if edges is not None:
         near = joined[:n_adjacent]
         edges.extend((src[:n_adjacent][near], dst[:n_adjacent][near]))
-    return _components(len(keys), src[joined], dst[joined])
+    return _components(len(voxels), src[joined], dst[joined])
 
 
-def _filter_components(grid: VoxelGrid, surface_of_voxel: np.ndarray, params: SurfaceParams) -> int:
+def _filter_components(
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    params: SurfaceParams,
+    widths: dict[bytes, float] | None = None,
+) -> int:
     """Drop, in place, components smaller than min_area or narrower than min_width; returns
-    how many were too narrow."""
+    how many were too narrow. widths: filled with the width of each footprint measured, by
+    ``_cells_key`` of its distinct cells (most surfaces end with the same cells)."""
     sv = np.flatnonzero(surface_of_voxel >= 0)
     if len(sv) == 0:
         return 0
@@ -327,15 +405,22 @@ def _filter_components(grid: VoxelGrid, surface_of_voxel: np.ndarray, params: Su
     keys = grid.keys[sv]
     vx, vy = params.voxel_size[0], params.voxel_size[1]
     # Footprint cells per component (a column holding two layers of one surface counts once).
-    _, cell_comp = _unique_cells(keys[:, :2], comp)
+    cell_lin, cell_comp = _unique_cells(keys[:, :2], comp)
     n_cells = np.bincount(cell_comp, minlength=int(comp.max()) + 1)
     big = np.flatnonzero(n_cells * vx * vy >= max(params.min_area, 1e-12))
     keep_comp = np.zeros(len(n_cells), dtype=bool)
-    order = np.argsort(comp, kind="stable")
-    bounds = np.searchsorted(comp[order], np.arange(len(n_cells) + 1))
     if len(big):  # footprint rasters of the sizeable components only (tens), not per voxel
-        cells = [keys[order[bounds[c] : bounds[c + 1]], :2] for c in big]
-        keep_comp[big] = footprint_widths(cells, (vx, vy)) >= params.min_width
+        # The distinct cells, (component, x, y) ascending: a footprint's raster, and width,
+        # do not depend on how many layers a column holds.
+        lo = keys[:, :2].min(axis=0)
+        span = int(keys[:, 1].max() - lo[1]) + 1
+        xy = np.stack([cell_lin // span, cell_lin % span], axis=1) + lo
+        bounds = np.searchsorted(cell_comp, np.arange(len(n_cells) + 1))
+        cells = [xy[bounds[c] : bounds[c + 1]] for c in big]
+        width = footprint_widths(cells, (vx, vy))
+        keep_comp[big] = width >= params.min_width
+        if widths is not None:
+            widths.update(zip((_cells_key(c) for c in cells), width.tolist(), strict=True))
     surface_of_voxel[sv[~keep_comp[comp]]] = -1
     return int(len(big) - keep_comp.sum())
 
@@ -456,6 +541,11 @@ def _drop_raised_plateaus(
         planes.normal[to] = planes.normal[by]
     surface_of_voxel[sv[gone]] = -1
     return int(gone.sum())
+
+
+def _cells_key(cells: np.ndarray) -> bytes:
+    """Hashable identity of (C, 2) distinct cells in ascending (x, y) order."""
+    return np.ascontiguousarray(cells, dtype=np.int64).tobytes()
 
 
 def _unique_cells(cells: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -610,33 +700,38 @@ def _absorb_clutter(
         )
         inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
         n_in = np.add.reduceat(inlier.astype(np.int64), first)
+        # The spread and level tests only for the trials with inliers enough (a few in ten).
+        sel = np.flatnonzero((n_in > params.p_min) & (n_in >= params.absorb_min_fraction * n_pts))
+        if len(sel) == 0:
+            break
+        n_sel = n_pts[sel]
+        first_sel = np.cumsum(n_sel) - n_sel
+        at = np.repeat(first[sel] - first_sel, n_sel) + np.arange(n_sel.sum())
+        off = [o[at] for o in off]
+        inlier = inlier[at]
         lo = np.stack(
-            [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first) for a in range(2)],
+            [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first_sel) for a in range(2)],
             axis=1,
         )
         hi = np.stack(
-            [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first) for a in range(2)],
+            [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first_sel) for a in range(2)],
             axis=1,
         )
         # The inliers must themselves be a level patch: a ramp crosses a level plane in a
         # band that would otherwise pass, voxel after voxel along its contour.
         w = inlier.astype(np.float64)
-        cnt = np.maximum(n_in, 1)
-        mean_in = [np.add.reduceat(off[a] * w, first) / cnt for a in range(3)]
+        cnt = np.maximum(n_in[sel], 1)
+        mean_in = [np.add.reduceat(off[a] * w, first_sel) / cnt for a in range(3)]
         # The inliers' covariance entries as columns, in OUTER_INDEX order.
         _, n_in_plane = sym3_eigen_entries(
             *(
-                np.add.reduceat(off[a] * off[b] * w, first) / cnt - mean_in[a] * mean_in[b]
+                np.add.reduceat(off[a] * off[b] * w, first_sel) / cnt - mean_in[a] * mean_in[b]
                 for a, b in OUTER_INDEX
             )
         )
         level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
-        good = (
-            (n_in > params.p_min)
-            & (n_in >= params.absorb_min_fraction * n_pts)
-            & np.all(hi - lo >= min_spread, axis=1)
-            & level
-        )
+        good = np.zeros(len(dst), dtype=bool)
+        good[sel] = np.all(hi - lo >= min_spread, axis=1) & level
         if not good.any():
             break
         # One surface per voxel: the neighbour explaining most of its points.
@@ -737,27 +832,27 @@ def _label_points_planar(
     layer-straddling surface spills into neighbouring layers). index:
     ``KeyIndex.build(grid.keys)``."""
     n = len(grid.order)
-    sorted_labels = np.full(n, -1, dtype=np.int64)
+    # int32 and no (N,) float fill: fresh pages cost more here than the arithmetic on them.
+    sorted_labels = np.full(n, -1, dtype=np.int32)
     sv = np.flatnonzero(surface_of_voxel >= 0)
     if len(sv) == 0:
         return sorted_labels
-    below, above = index.neighbours_many(
-        np.arange(len(grid.counts)), [(0, 0, -1), (0, 0, 1)], grid.keys
-    )
+    # The voxels just above and below the surface voxels: those whose neighbour below or
+    # above is one (ascending, as keys + 1 in z keep the voxels' order).
+    up, down = index.neighbours_many(sv, [(0, 0, 1), (0, 0, -1)], grid.keys)
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
     lx, ly, lz = grid.local
-    best = np.full(n, np.inf)
+    best = np.empty(n)  # distance of each labelled point to its plane; read where labelled
     for dz in (0, -1, 1):  # three column neighbours, each vectorised over voxels and points
         if dz == 0:
             vsel = sv
             t = sv
         else:
-            hit = below if dz < 0 else above
-            vsel = np.flatnonzero(hit >= 0)
-            vsel = vsel[surface_of_voxel[hit[vsel]] >= 0]
+            hit = up if dz < 0 else down
+            on = hit >= 0
+            vsel, t = hit[on], sv[on]
             if len(vsel) == 0:
                 continue
-            t = hit[vsel]
         # The plane of surface voxel t as z = A + bx*lx + by*ly in voxel vsel's local frame.
         nrm = planes.normal[t]
         bx, by = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
@@ -775,7 +870,10 @@ def _label_points_planar(
         )
         # Per voxel, then repeated: the tolerance of each voxel's surface, not a gather per point.
         surf_v = surface_of_voxel[t]
-        better = (dist <= np.repeat(tol_by_comp[surf_v], cnt)) & (dist < best[pos])
+        better = dist <= np.repeat(tol_by_comp[surf_v], cnt)
+        if dz != 0:  # a labelled point changes surface only for a nearer plane
+            seen = np.flatnonzero(better & (sorted_labels[pos] >= 0))
+            better[seen] = dist[seen] < best[pos[seen]]
         idx = np.flatnonzero(better)
         at = pos[idx]
         sorted_labels[at] = np.repeat(surf_v, cnt)[idx]
@@ -804,14 +902,17 @@ def _summarise(
     sorted_labels: np.ndarray,
     surface_of_voxel: np.ndarray,
     params: SurfaceParams,
+    widths: dict[bytes, float] | None = None,
 ) -> tuple[list[Surface], np.ndarray]:
     """Per-surface properties from its points; surfaces sorted largest first, ids 0..
 
-    sorted_labels: (N,) component of each point in the grid's voxel order; returns the
-    surfaces and the points' surface ids in that order."""
+    sorted_labels: (N,) component of each point in the grid's voxel order, -1 for none;
+    returns the surfaces and each component's surface id: ``lut[sorted_labels]`` (int32,
+    its last entry -1 for the points on none). widths: footprint widths already
+    measured, by ``_cells_key`` of the footprint (see :func:`_filter_components`)."""
     at = np.flatnonzero(sorted_labels >= 0)
     if len(at) == 0:
-        return [], np.full(len(sorted_labels), -1, dtype=np.int64)
+        return [], np.full(1, -1, dtype=np.int32)
     lab = sorted_labels[at]
     present = np.bincount(lab)
     comps = np.flatnonzero(present)
@@ -906,7 +1007,12 @@ def _summarise(
     rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
     new_id = np.empty(s_count, dtype=np.int64)
     new_id[rank] = np.arange(s_count)
-    width = footprint_widths(cells_of, (vx, vy))
+    width = np.array(
+        [-1.0 if widths is None else widths.get(_cells_key(c), -1.0) for c in cells_of]
+    )
+    todo = np.flatnonzero(width < 0)
+    if len(todo):
+        width[todo] = footprint_widths([cells_of[i] for i in todo], (vx, vy))
     surfaces = []
     for sid, c in enumerate(rank):  # one entry per surface
         cells = cells_of[c]
@@ -928,20 +1034,22 @@ def _summarise(
                 width=float(width[c]),
             )
         )
-    new_id = np.append(new_id, -1)
-    return surfaces, new_id[remap[sorted_labels]]
+    new_id = np.append(new_id, -1).astype(np.int32)
+    return surfaces, new_id[remap]
 
 
 def _drop_unfit(
     grid: VoxelGrid,
     surfaces: list[Surface],
     labels: np.ndarray,
+    lut: np.ndarray,
     params: SurfaceParams,
     sensor_origin: np.ndarray | None,
 ) -> tuple[list[Surface], np.ndarray]:
     """Final tests on each surface as a whole; ids stay in largest-first order.
 
-    labels: (N,) surface ids of the grid's points in its voxel order (``grid.order``).
+    labels, lut: the surface id of the grid's points, in its voxel order (``grid.order``),
+    is ``lut[labels]``; returns the surfaces kept and the lut to their new ids.
     Size on measured areas and widths (growth could only bound them by whole cells); tilt of
     the plane fitted to all its points (sparse scan lines across a ramp look level voxel by
     voxel); seen from above when the sensor position is known; not the top of an object
@@ -956,15 +1064,15 @@ def _drop_unfit(
         and s.normal[2] >= cos_tilt
         and s.height < below
     ]
-    tops = _object_tops(grid, labels, keep, params)
+    tops = _object_tops(grid, labels, lut, keep, params)
     keep = [s for s, top in zip(keep, tops, strict=True) if not top]
     if len(keep) == len(surfaces):
-        return surfaces, labels
+        return surfaces, lut
     new_id = np.full(len(surfaces) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
     for i, s in enumerate(keep):
         new_id[s.id] = i
         s.id = i
-    return keep, new_id[labels]
+    return keep, new_id[lut].astype(np.int32)
 
 
 # An object top is surrounded by its lower surface on at least this share of its outline (a
@@ -983,11 +1091,15 @@ _TOP_MIN_LOAD = 30
 
 
 def _object_tops(
-    grid: VoxelGrid, labels: np.ndarray, surfaces: list[Surface], params: SurfaceParams
+    grid: VoxelGrid,
+    labels: np.ndarray,
+    lut: np.ndarray,
+    surfaces: list[Surface],
+    params: SurfaceParams,
 ) -> np.ndarray:
     """(S,) bool: which surfaces are the tops of objects standing on another surface.
 
-    labels: (N,) surface ids in the grid's voxel order. A face is an object's top when it is
+    lut[labels]: (N,) surface ids in the grid's voxel order. A face is an object's top when it is
     small (``object_top_max_area``), low above a surface lying around it
     (``object_top_max_height``), and that surface is not seen under it. A table or a shelf
     board differs in one of these: it is large, or high, or the floor or board below it
@@ -1032,10 +1144,12 @@ def _object_tops(
             {surfaces[i].id for i in below} | {surfaces[j].id for b in below.values() for j in b}
         )
     )
-    vox = np.flatnonzero(np.isin(lin(grid.keys[:, :2]), np.concatenate([keys[i] for i in below])))
+    voxel_cell = lin(grid.keys[:, :2])  # each voxel's column, for this and _load
+    vox = np.flatnonzero(np.isin(voxel_cell, np.concatenate([keys[i] for i in below])))
     n_pts = grid.counts[vox]
     pos = np.repeat(grid.starts[vox] - (np.cumsum(n_pts) - n_pts), n_pts) + np.arange(n_pts.sum())
-    pos = pos[np.isin(labels[pos], ids)]
+    sid = lut[labels[pos]]
+    pos = pos[np.isin(sid, ids)]
     step = max(1, len(pos) // _TOP_MAX_POINTS)
     pos = pos[::step]
     v = np.searchsorted(grid.starts, pos, side="right") - 1
@@ -1043,7 +1157,7 @@ def _object_tops(
         np.stack([grid.local[0][pos], grid.local[1][pos]], axis=1)
         + grid.keys[v, :2] * grid.size[:2]
     )
-    sid = labels[pos]
+    sid = lut[labels[pos]]
     for i, under in below.items():
         s = surfaces[i]
         inner, (origin, cell) = _inner_footprint(xy[sid == s.id], s.area)
@@ -1059,31 +1173,36 @@ def _object_tops(
                 out[i] = True
                 break
     for i in np.flatnonzero(out):  # a few object tops: do they carry something?
-        out[i] = _load(grid, labels, keys[i], lin, surfaces[i].height, params) < _TOP_MIN_LOAD
+        out[i] = (
+            _load(grid, labels, lut, keys[i], voxel_cell, surfaces[i].height, params)
+            < _TOP_MIN_LOAD
+        )
     return out
 
 
 def _load(
     grid: VoxelGrid,
     labels: np.ndarray,
+    lut: np.ndarray,
     cells: np.ndarray,
-    lin: Callable[[np.ndarray], np.ndarray],
+    voxel_cell: np.ndarray,
     height: float,
     params: SurfaceParams,
 ) -> int:
     """Off-surface points over the ``cells`` (linear keys) of a face at ``height``, from
     2 ``point_tolerance`` to ``object_top_max_height`` above it, in cells where nothing rises
-    higher (a wall beside the face shares its edge cells and goes on up)."""
-    vox = np.flatnonzero(np.isin(lin(grid.keys[:, :2]), cells))
+    higher (a wall beside the face shares its edge cells and goes on up). voxel_cell: (M,)
+    the linear key of each voxel's column, as ``cells``."""
+    vox = np.flatnonzero(np.isin(voxel_cell, cells))
     if len(vox) == 0:
         return 0
     n_pts = grid.counts[vox]
     pos = np.repeat(grid.starts[vox] - (np.cumsum(n_pts) - n_pts), n_pts) + np.arange(n_pts.sum())
     v = np.repeat(vox, n_pts)
     z = grid.local[2][pos] + grid.keys[v, 2] * grid.size[2]
-    cell = lin(grid.keys[v, :2])
+    cell = voxel_cell[v]
     tall = np.unique(cell[z > height + params.object_top_max_height])
-    above = (z > height + 2 * params.point_tolerance) & (labels[pos] < 0)
+    above = (z > height + 2 * params.point_tolerance) & (lut[labels[pos]] < 0)
     return int((above & ~np.isin(cell, tall)).sum())
 
 
@@ -1209,8 +1328,7 @@ def cells_outlines(
     owner = owner[by] // 4
     nxt = _next_edge(e, owner)
     n = len(e)
-    graph = coo_matrix((np.ones(n, dtype=np.int8), (np.arange(n), nxt)), shape=(n, n))
-    _, ring = connected_components(graph, directed=False)
+    ring = _components(n, np.arange(n), nxt)
     # Walk order without walking: cut each ring after its smallest edge index, then rank every
     # edge by its distance to the cut (pointer jumping: log2(E) vectorised rounds).
     n_rings = int(ring.max()) + 1
