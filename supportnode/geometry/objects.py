@@ -90,10 +90,10 @@ _TABLE_MAX_CELLS = 8_000_000
 # many cells in all): 2 M cells is a 6 x 5 x 2.5 m room at 3 cm, 10 MB of int32.
 _DENSE_CELLS_PER_POINT = 64
 _DENSE_MIN_CELLS = 4_000_000
-# _edt_inner searches the nearest empty cell of the inner cells of rasters of at least this
-# many cells, as long as that touches at most _EDT_SEARCH_MAX times their cell count.
-_EDT_SEARCH_MIN_CELLS = 16_384
-_EDT_SEARCH_MAX = 0.5
+# _edt_inner works on the occupied cells only of rasters of at least this many cells, at most
+# _EDT_SPARSE_MAX_FILL of them occupied (a ring of walls: 2-4 %); scipy's on the rest.
+_EDT_SPARSE_MIN_CELLS = 16_384
+_EDT_SPARSE_MAX_FILL = 0.125
 # _fill_holes first counts the holes (see _hole_count) on rasters of at least this many cells:
 # a wall cluster's footprint (a thin ring, open at a door) usually has none.
 _FILL_CHECK_MIN_CELLS = 65_536
@@ -719,6 +719,77 @@ def _split_recursive(
     return out
 
 
+def _big_parts(occ: np.ndarray, n_cells: int, comp: np.ndarray, deep: np.ndarray) -> np.ndarray:
+    """(n,) bool: the deep parts (deep (n,), parts labelled 1..n in comp (H, W)) whose area, the
+    cells of the footprint occ (H, W) (n_cells of them) nearest to the part, is at least
+    _SPLIT_MIN_FRACTION of the footprint.
+
+    A cell equidistant from two parts goes to either, as scipy's feature transform picks. On a
+    big, sparse raster (a ring of walls: a 500 x 400 raster, 1-5k footprint cells) the
+    transform of the whole raster costs 8-12 ms. There, each footprint cell's squared distance
+    to every deep part comes from a k-d tree of the part's cells (exact on integer cells), and
+    the areas counting tied cells for no part and for every part bound the true ones; when
+    both bounds agree on every part, that is the answer, else the transform decides.
+    """
+    n = len(deep)
+    if occ.size >= _EDT_SPARSE_MIN_CELLS and n_cells <= _EDT_SPARSE_MAX_FILL * occ.size:
+        ci, cj = np.divmod(np.flatnonzero(occ), occ.shape[1])
+        lab = comp[ci, cj]  # 0 outside the level's set
+        parts = np.flatnonzero(deep) + 1
+        is_part = deep[np.maximum(lab - 1, 0)] & (lab > 0)
+        # A part's own cells are at distance 0 from it only: they count for it alone.
+        own = np.bincount(lab[is_part], minlength=n + 1)[parts]
+        qi, qj = ci[~is_part], cj[~is_part]
+        query = np.column_stack([qi, qj]).astype(np.float64)
+        d2 = np.empty((len(parts), len(qi)), dtype=np.int64)
+        for k, p in enumerate(parts):  # a few parts
+            sel = lab == p
+            pi, pj = ci[sel], cj[sel]
+            tree = cKDTree(np.column_stack([pi, pj]).astype(np.float64))
+            _, near = tree.query(query)
+            d2[k] = (qi - pi[near]) ** 2 + (qj - pj[near]) ** 2
+        tied = d2 == d2.min(axis=0)
+        alone = tied.sum(axis=0) == 1
+        low = own + tied[:, alone].sum(axis=1)
+        high = low + tied[:, ~alone].sum(axis=1)
+        need = _SPLIT_MIN_FRACTION * n_cells
+        if ((low >= need) == (high >= need)).all():
+            big = np.zeros(n, dtype=bool)
+            big[parts - 1] = low >= need
+            return big
+    markers = np.where(deep[np.maximum(comp - 1, 0)] & (comp > 0), comp, 0)
+    _, (ni, nj) = ndimage.distance_transform_edt(markers == 0, return_indices=True)
+    owner = markers[ni, nj]  # nearest part of every cell
+    area = np.bincount(owner[occ], minlength=n + 1)[1:]
+    return deep & (area >= _SPLIT_MIN_FRACTION * n_cells)
+
+
+def _first_level(
+    depth: np.ndarray, levels: list[float], cell: float, radius: float
+) -> tuple[int, dict[int, tuple[np.ndarray, int]]]:
+    """The index of the first of the ascending levels at which _split_footprint's loop may find
+    two deep parts, and the labellings (labels, count) it made, by level index.
+
+    A deep part holds a cell of depth (H, W) >= 1.5 * radius / cell (the set K). At a level t
+    below K's shallowest cell, K lies inside the set labelled (depth > t); if K lies in one of
+    its components there, it does at every lower level too (their sets hold this one), so those
+    levels have at most one deep part. The test labels the highest such level once: a ring of
+    noisy walls has a dozen pieces of K, all joined along the wall, and 4-6 levels labelled on
+    a room-sized raster are saved. When K is split there, the labels are reused by the loop.
+    """
+    deep = depth * cell >= 1.5 * radius
+    kmin = float(depth[deep].min())
+    below = [k for k, t in enumerate(levels) if t < kmin]
+    if len(below) < 2:
+        return 0, {}
+    k = below[-1]
+    comp, n = ndimage.label(depth > levels[k], structure=np.ones((3, 3), dtype=bool))
+    on_k = comp[deep]
+    if n < 2 or (on_k == on_k[0]).all():
+        return k + 1, {}
+    return 0, {k: (comp, n)}
+
+
 def _split_footprint(
     xy: np.ndarray, cell: float, radius: float, min_points: int
 ) -> np.ndarray | None:
@@ -738,10 +809,13 @@ def _split_footprint(
     shape = np.floor((_col(np.maximum, xy) - lo) / cell).astype(np.int64) + 3  # = ij.max + 2
     if not _may_split(shape, cell, radius):  # too thin to hold a part deep enough
         return None
-    u = (xy - lo) / cell  # raster coordinates (P, 2), also of the power distances below
-    ij = u.astype(np.int64) + 1  # +1: empty border; truncation = floor (>= 0)
+    # Raster coordinates, also of the power distances below; column by column, as (xy - lo)
+    # would run numpy's inner loop over 2 elements.
+    ux = (xy[:, 0] - lo[0]) / cell
+    uy = (xy[:, 1] - lo[1]) / cell
     occ = np.zeros(tuple(shape), dtype=bool)
-    occ[ij[:, 0], ij[:, 1]] = True
+    # +1: empty border; truncation = floor (>= 0). One flat index, not a 2-D fancy index.
+    occ.reshape(-1)[(ux.astype(np.int64) + 1) * int(shape[1]) + uy.astype(np.int64) + 1] = True
     # Closing bridges the gaps between sample points (a 2 cm lattice on the 1 cm raster).
     # Filling holes makes a side-scanned barrel a disc, not a ring that erosion would wipe out,
     # and removes the speckle of sparse, noisy sampling that would fake saddles. (It also fills
@@ -752,8 +826,8 @@ def _split_footprint(
     if not _taxicab_deep(occ, cell, 1.5 * radius):
         return None
     eight = np.ones((3, 3), dtype=bool)
-    n_cells = int(occ.sum())
-    depth = _edt_inner(occ) - 0.5  # cell centre to footprint edge, cells
+    n_cells = int(np.count_nonzero(occ))
+    depth = _edt_inner(occ, n_cells) - 0.5  # cell centre to footprint edge, cells
     depth[~occ] = 0.0
     top = float(depth.max())
     if top * cell < 1.5 * radius:
@@ -764,10 +838,18 @@ def _split_footprint(
     box = _true_box(depth > 0.5)
     depth_box = depth[box]
     # Ascending levels, the shallowest neck is cut first; at most ~40 levels for big footprints.
+    levels = []
     for t in np.arange(0.5, top, max(0.5, top / 40.0)):
         if t * cell >= radius and t > _SPLIT_NECK_RATIO * top:
             break  # no part can be deep enough for this level or any higher one (see below)
-        comp_box, n = ndimage.label(depth_box > t, structure=eight)
+        levels.append(t)
+    first, probed = _first_level(depth_box, levels, cell, radius)
+    for k in range(first, len(levels)):
+        t = levels[k]
+        if k in probed:
+            comp_box, n = probed[k]
+        else:
+            comp_box, n = ndimage.label(depth_box > t, structure=eight)
         if n < 2:
             continue
         inside = comp_box > 0
@@ -782,11 +864,7 @@ def _split_footprint(
             continue
         comp = np.zeros(occ.shape, dtype=comp_box.dtype)
         comp[box] = comp_box
-        markers = np.where(deep[np.maximum(comp - 1, 0)] & (comp > 0), comp, 0)
-        _, (ni, nj) = ndimage.distance_transform_edt(markers == 0, return_indices=True)
-        owner = markers[ni, nj]  # nearest part of every cell
-        area = np.bincount(owner[occ], minlength=n + 1)[1:]
-        big = deep & (area >= _SPLIT_MIN_FRACTION * n_cells)
+        big = _big_parts(occ, n_cells, comp, deep)
         if big.sum() < 2:
             continue
         # Each point goes to the part of least power distance |p - c|^2 - rho^2, with c, rho
@@ -810,12 +888,12 @@ def _split_footprint(
             ],
             axis=1,
         )
-        uv = u + 0.5  # cell i's centre is at coordinate i (u: the same xy - min, / cell)
+        vx, vy = ux + 0.5, uy + 0.5  # cell i's centre is at coordinate i
         # (K, P), row by row: the same sums dx^2 + dy^2 as summing a (K, P, 2) array over its
         # last axis, without that array and its strided reduction.
         dist = np.stack(
             [
-                (uv[:, 0] - ck[0]) ** 2 + (uv[:, 1] - ck[1]) ** 2 - rk2
+                (vx - ck[0]) ** 2 + (vy - ck[1]) ** 2 - rk2
                 for ck, rk2 in zip(centre, rho**2, strict=True)
             ]
         )
@@ -1027,48 +1105,54 @@ def _true_box(mask: np.ndarray) -> tuple[slice, slice]:
     return slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1)
 
 
-def _edt_inner(mask: np.ndarray) -> np.ndarray:
+def _edt_inner(mask: np.ndarray, count: int | None = None) -> np.ndarray:
     """``ndimage.distance_transform_edt(mask)`` (H, W) float64, cells, of a 2-D bool mask whose
-    outer rows and columns are empty; the same values.
+    outer rows and columns are empty; the same values. count: ``mask.sum()`` when known.
 
     A room-sized cluster of walls has a big, nearly empty footprint raster, where scipy's
-    transform costs ~40 ns per cell (10 ms). There, only the few cells with no empty
-    4-neighbour lie further than 1 from the background: each of them looks for its nearest
-    empty cell among the offsets in rings of growing radius, by squared length (the distance
-    is sqrt of that integer, as scipy computes it from its feature transform). Offsets past
-    the raster's edge count as empty: the border cell on the way is empty and no further.
-    When that search would touch more than _EDT_SEARCH_MAX of the raster's cell count
-    (a solid footprint), scipy's transform is used.
+    transform costs ~40 ns per cell (5-12 ms). On a raster of at least _EDT_SPARSE_MIN_CELLS
+    cells, at most _EDT_SPARSE_MAX_FILL of them occupied, the distance is taken at the occupied
+    cells only, separably: the distance to the nearest empty cell in the same column (from the
+    column's runs of occupied cells), then the least ``g(i, j +- d)^2 + d^2`` over growing
+    column offsets d, each cell dropping out once d^2 reaches its best. That minimum is the
+    exact squared distance, an integer; its sqrt is what scipy takes of the same integer.
     """
     h, w = mask.shape
-    if mask.size < _EDT_SEARCH_MIN_CELLS:
+    if count is None:
+        count = int(np.count_nonzero(mask))
+    if mask.size < _EDT_SPARSE_MIN_CELLS or count > _EDT_SPARSE_MAX_FILL * mask.size:
         return ndimage.distance_transform_edt(mask)
-    inner = np.zeros_like(mask)
-    inner[1:-1, 1:-1] = (
-        mask[1:-1, 1:-1] & mask[:-2, 1:-1] & mask[2:, 1:-1] & mask[1:-1, :-2] & mask[1:-1, 2:]
-    )
-    ii, jj = np.divmod(np.flatnonzero(inner), w)  # np.nonzero of a 2-D mask is 3x slower
-    budget = _EDT_SEARCH_MAX * mask.size
-    out = mask.astype(np.float64)  # 1 at cells beside the background (sqrt(1)), 0 on it
-    done, radius = 1, 4  # squared lengths up to `done` searched; ring radius, cells
-    while len(ii):
-        d = np.arange(-radius, radius + 1)
-        k = (d[:, None] ** 2 + d[None, :] ** 2).ravel()
-        sel = np.flatnonzero((k > done) & (k <= radius * radius))
-        sel = sel[np.argsort(k[sel], kind="stable")]  # by squared length
-        budget -= len(ii) * len(sel)
-        if budget < 0:
-            return ndimage.distance_transform_edt(mask)
-        di, dj = d[sel // len(d)], d[sel % len(d)]
-        empty = ~mask[
-            np.clip(ii[:, None] + di, 0, h - 1), np.clip(jj[:, None] + dj, 0, w - 1)
-        ]  # (cells, offsets)
-        first = np.argmax(empty, axis=1)
-        found = empty[np.arange(len(ii)), first]
-        out[ii[found], jj[found]] = np.sqrt(k[sel][first[found]].astype(np.float64))
-        ii, jj = ii[~found], jj[~found]
-        done, radius = radius * radius, 2 * radius
-    return out
+    out = np.zeros(h * w)
+    if count == 0:
+        return out.reshape(h, w)
+    # Column-major flat indices j * h + i: a run of consecutive ones is a run down a column,
+    # never across two (the first and last rows are empty).
+    cm = np.flatnonzero(mask.T)
+    brk = np.empty(len(cm), dtype=bool)
+    brk[0] = True
+    np.not_equal(cm[1:], cm[:-1] + 1, out=brk[1:])
+    start = np.flatnonzero(brk)
+    length = np.diff(start, append=len(cm))
+    pos = np.arange(len(cm)) - np.repeat(start, length)  # 0 at a run's first cell
+    g = np.minimum(pos + 1, np.repeat(length, length) - pos)  # to the empty cell above / below
+    j, i = np.divmod(cm, h)
+    flat = i * w + j
+    col_dist = np.zeros(h * w, dtype=np.int32)  # 0 at empty cells; int32: fewer pages touched
+    col_dist[flat] = g
+    d2 = g * g
+    # Offset d never reaches past the empty first or last column: a cell d columns from it has
+    # d2 <= d^2 and drops out before.
+    cand = np.flatnonzero(d2 > 1)
+    d = 1
+    while len(cand):
+        f = flat[cand]
+        near = np.minimum(col_dist[f - d], col_dist[f + d]).astype(np.int64)
+        best = np.minimum(d2[cand], near * near + d * d)
+        d2[cand] = best
+        d += 1
+        cand = cand[best > d * d]  # offsets >= d give at least d^2
+    out[flat] = np.sqrt(d2.astype(np.float64))
+    return out.reshape(h, w)
 
 
 class _CellIndex:
