@@ -188,7 +188,12 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0, in_process: bool = False) -
     part = span / parts
     rss = [
         max(
-            (d.gauges["rss_mb"] for t, d in diags if k * part <= t < (k + 1) * part),
+            # the node's process and its detection worker's
+            (
+                d.gauges["rss_mb"] + d.gauges.get("rss_mb_worker", 0.0)
+                for t, d in diags
+                if k * part <= t < (k + 1) * part
+            ),
             default=float("nan"),
         )
         for k in range(parts)

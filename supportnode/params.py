@@ -297,6 +297,11 @@ class NodeParams:
         "merge every scan into the map as it arrives and detect in a second thread on the "
         "newest map (false: one thread; scans that arrive while detecting are dropped)",
     )
+    detect_process: bool = param(
+        True,
+        "pipeline: run the detection in a worker process, so that merging and detection each "
+        "have a core and an interpreter lock of their own (false: a thread of the node)",
+    )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
         64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024

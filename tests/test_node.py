@@ -298,6 +298,7 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
         scan_endpoint=pub.endpoint,
         pub_endpoint="tcp://127.0.0.1:*",
         pipeline=pipeline,
+        detect_process=False,  # the slow detection is patched into this process
         map_period=0.0,
     )
     pose = _sensor_pose(0, 0, 1.5)

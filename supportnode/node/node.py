@@ -9,8 +9,10 @@ sockets, keep-newest input, the diagnostics timer and clean shutdown on SIGINT/S
 the map as it arrives; a detection thread runs on the newest map state and publishes. When
 detection is slower than the scans, it skips to the newest scan (counted), but the map still
 has every scan; a scan that arrived while detection was busy gives way to the next one when
-that is due within a scan period (see `_detect_loop`). numpy and scipy release the GIL in their
-loops, so the two threads overlap.
+that is due within a scan period (see `_detect_loop`). The detection thread hands the map's
+points to a worker process (``node.detect_process``, `supportnode.node.worker`), so that the
+merge and the detection do not take turns at one interpreter lock. If the worker dies, the
+thread detects by itself meanwhile and the worker is restarted (at most _WORKER_RESTARTS times).
 
     with Node(load_config("config/default.yaml")) as node:
         out = node.process(cloud)            # NodeOutput: SupportSurfaces, ObstacleClusters
@@ -61,6 +63,7 @@ from supportnode.node.incremental import Items
 from supportnode.node.latency import LatencyWindow, RateLimitedLog
 from supportnode.node.map import VoxelMap
 from supportnode.node.tracking import ClusterTracker, SurfaceTracker
+from supportnode.node.worker import DetectionWorker, WorkerError
 from supportnode.params import DetectParams
 
 __all__ = ["MapLike", "Node", "NodeOutput", "quaternion_matrix"]
@@ -82,6 +85,9 @@ _TIME_JUMP = 1e-3
 _POLL_S = 0.05
 # A scan handed to detection while it was busy waits at most this long for a newer one.
 _FRESH_WAIT_MAX_S = 0.5
+# A detection worker that died is restarted after this long, this many times at most.
+_WORKER_RESTART_S = 5.0
+_WORKER_RESTARTS = 3
 # Points of the published map at most (3 MB a message): a map of millions of voxels is thinned.
 MAP_MAX_POINTS = 262_144
 
@@ -237,6 +243,8 @@ class Node(Closing):
             "diagnostics_sent": 0,
             "maps_sent": 0,
             "detections_skipped": 0,
+            "worker_detections": 0,
+            "worker_failures": 0,
         }
         self.rejects: dict[str, int] = {}
         self.last_reject = ""
@@ -260,6 +268,10 @@ class Node(Closing):
         self._scan_period: float | None = None  # running mean of the time between scans, s
         self._last_recv: float | None = None
         self._generation = 0
+        self._worker: DetectionWorker | None = None
+        self._worker_restart_at: float | None = None  # monotonic time of the next start
+        self._worker_starts = 0
+        self._worker_logged: int | None = None  # pid of the worker announced in the log
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -425,7 +437,9 @@ class Node(Closing):
                 raw = self.map.points()
             points = raw if level else transform_points(raw, rotation)
             fetch_time[0] += time.perf_counter() - t
-            items = incremental.full(points, self.params, memo=self._memo)
+            items = self._full(points)
+            if items is None:
+                return None  # stopped while the worker was detecting
         if not reused:
             timings["points"] = fetch_time[0]
             timings.update({k: v for k, v in items.timings.items()})
@@ -440,6 +454,46 @@ class Node(Closing):
             out = self._messages(items, sensor_z, job.stamp, job.frame, timings, is_incremental)
             out.reused = reused
             return out
+
+    def _full(self, points: np.ndarray) -> Items | None:
+        """Full detection on (N, 3) detection-frame points: in the worker process when it
+        is up, else in this thread. None when the node stopped during the detection."""
+        self._start_worker_when_due()
+        w = self._worker
+        try:
+            if w is not None and w.ready():
+                if self._worker_logged != w.pid:
+                    self._worker_logged = w.pid
+                    self.log.info("detection worker ready (pid %d)", w.pid)
+                items = w.detect(points, self._stop)
+                self.counters["worker_detections"] += 1
+                return items
+        except WorkerError as err:
+            if self._stop.is_set():
+                return None
+            self._worker = None
+            w.close()
+            self.counters["worker_failures"] += 1
+            again = self._worker_starts <= _WORKER_RESTARTS
+            self.log.warning(
+                "%s; detecting in the node's thread%s",
+                err,
+                f", restart in {_WORKER_RESTART_S:g} s" if again else " from now on",
+            )
+            if again:
+                self._worker_restart_at = time.monotonic() + _WORKER_RESTART_S
+        return incremental.full(points, self.params, memo=self._memo)
+
+    def _start_worker_when_due(self) -> None:
+        due = self._worker_restart_at
+        if due is None or time.monotonic() < due or self._stop.is_set():
+            return
+        self._worker_restart_at = None
+        self._worker_starts += 1
+        try:
+            self._worker = DetectionWorker.start(self.params)
+        except WorkerError as err:
+            self.log.warning("%s; detecting in the node's thread", err)
 
     def _messages(
         self,
@@ -625,6 +679,9 @@ class Node(Closing):
         worker = None
         if self.cfg.pipeline:
             self._job = None
+            if self.cfg.detect_process:
+                self._worker_restart_at, self._worker_starts = time.monotonic(), 0
+                self._start_worker_when_due()  # the worker imports while scans arrive
             worker = threading.Thread(target=self._detect_loop, name="detect", daemon=True)
             worker.start()
         try:
@@ -663,6 +720,10 @@ class Node(Closing):
                 with self._job_ready:
                     self._job_ready.notify_all()
                 worker.join(5.0)
+            if self._worker is not None:
+                self._worker.close()
+                self._worker = None
+            self._worker_restart_at = None
             for sig, old in restore.items():
                 signal.signal(sig, old)
 
@@ -778,6 +839,7 @@ class Node(Closing):
             "gravity_up_z": float(up[2]),
             "gravity_source": float(("none", "given", "estimated").index(self.gravity.source)),
             "rss_mb": _rss_mb(),
+            "rss_mb_worker": self._worker.rss_mb() if self._worker is not None else math.nan,
         }
         level, message = "ok", ""
         if self.counters["scans_processed"] == 0:
