@@ -260,6 +260,10 @@ def test_out_of_range(tmp_path: Path) -> None:
             "surfaces.normal_filter: expected true or false, got 1",
         ),
         (
+            "node:\n  detect_process: maybe\n",
+            "node.detect_process: expected true or false, got 'maybe'",
+        ),
+        (
             "surfaces:\n  normal_filter: 'true'\n",
             "surfaces.normal_filter: expected true or false, got 'true'",
         ),

@@ -703,7 +703,7 @@ class Node(Closing):
                 if frames is not None:
                     t_recv = time.perf_counter()
                     if worker is not None:
-                        self._ingest_for_worker(frames, t_recv)
+                        self._ingest_for_detection(frames, t_recv)
                     else:
                         out = self.handle(frames)
                         if out is not None and out.surfaces is not None:
@@ -729,7 +729,7 @@ class Node(Closing):
 
     # ------------------------------------------------------------------ pipelined spin
 
-    def _ingest_for_worker(self, frames: Any, t_recv: float) -> None:
+    def _ingest_for_detection(self, frames: Any, t_recv: float) -> None:
         """Receiving thread: decode, merge into the map, hand the newest scan to detection."""
         msg = self._decode(frames)
         if msg is None:
