@@ -302,6 +302,12 @@ class NodeParams:
         "pipeline: run the detection in a worker process, so that merging and detection each "
         "have a core and an interpreter lock of their own (false: a thread of the node)",
     )
+    surfaces_first: bool = param(
+        True,
+        "pipeline: publish each detection's surfaces (with their free space) as soon as they "
+        "are known and its obstacles once they are described, with the same seq (false: both "
+        "together, obstacles first, so a planner that reacts to surfaces has their obstacles)",
+    )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
         64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024

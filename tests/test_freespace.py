@@ -122,3 +122,45 @@ def test_fully_covered_surface_has_no_disc():
     _, _, objs = table_with_box((0.4, 0.4), (0.6, 0.6))
     fs = free_space(small, objs.clusters, None, FreeSpaceParams(cell_size=C, margin=0.05))
     assert fs.free_area == 0.0 and fs.disc_radius == 0.0 and np.isnan(fs.disc_center).all()
+
+
+def test_free_space_from_the_segmentation_equals_that_from_the_described_objects():
+    """Free space needs only which points form which object and what it stands on: computed
+    before the objects are described (hulls, boxes), it is the same, mask and all."""
+    from supportnode.geometry.objects import describe_objects, segment_objects
+
+    sq = make_surface(0, 0.7, 0.0, 1.0, 0.0, 1.0)
+    boxes = [box((0.1, 0.1, 0.7), (0.3, 0.25, 0.85)), box((0.55, 0.5, 0.7), (0.8, 0.9, 1.0))]
+    pts = np.concatenate([plane(0, 1, 0, 1, 0.7), *boxes])
+    n_obj = sum(len(b) for b in boxes)
+    lab = np.concatenate([np.zeros(len(pts) - n_obj, np.int32), np.full(n_obj, -1, np.int32)])
+    surfs = SurfaceResult([sq], lab)
+    seg = segment_objects(pts, surfs)
+    objs = describe_objects(seg)
+    assert len(objs.clusters) == 2
+    np.testing.assert_array_equal(seg.labels, objs.labels)
+    assert seg.surface_ids.tolist() == [c.surface_id for c in objs.clusters] == [0, 0]
+    np.testing.assert_array_equal(seg.bbox_min, [c.bbox_min for c in objs.clusters])
+    ref = detect_objects(pts, surfs)
+    assert [c.to_dict() for c in objs.clusters] == [c.to_dict() for c in ref.clusters]
+    params = FreeSpaceParams(cell_size=C, margin=0.05)
+    (a,), (b,) = free_space_all(surfs, seg, pts, params), free_space_all(surfs, objs, pts, params)
+    assert a.to_dict() == b.to_dict() and 0 < a.free_area < 1.0
+    np.testing.assert_array_equal(a.free_mask, b.free_mask)
+
+
+def test_detect_reports_surfaces_before_describing_objects(rng):
+    """pipeline.detect(on_surfaces=...) hands over the surfaces and free space, the same as in
+    its result, while the objects are not yet described."""
+    from supportnode.pipeline import detect
+
+    floor = plane(-1, 1, -1, 1, 0.0, step=0.02)
+    b = box((0.0, 0.0, 0.0), (0.3, 0.3, 0.4))
+    pts = np.concatenate([floor, b])
+    seen = []
+    d = detect(pts, on_surfaces=lambda s, f, seg: seen.append((s, f, seg)))
+    assert len(seen) == 1
+    s, f, seg = seen[0]
+    assert s is d.surfaces and [x.to_dict() for x in f] == [x.to_dict() for x in d.free_space]
+    assert len(seg.surface_ids) == len(d.objects.clusters) >= 1
+    assert f[0].occupied_area > 0.09  # the box's footprint, before any hull was computed

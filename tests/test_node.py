@@ -360,3 +360,56 @@ def test_real_kinect_sequence_keeps_its_points_and_ids(real_scans):
     assert max(renewed[3:]) <= 0.02 * voxels  # 4-6 of ~1,230; 11-26 % by the plane test alone
     assert sum(len(o.new_ids["obstacles"]) for o in outs[3:]) <= 1
     assert [len(o.surfaces.surfaces) for o in outs[3:]] == [1] * 6
+
+
+@pytest.mark.parametrize("surfaces_first", [True, False])
+def test_surfaces_first_over_sockets(rng, surfaces_first):
+    """node.surfaces_first: each detection's surfaces go out before its obstacles (same seq),
+    so a planner gets the places to stand and their free space without waiting for the
+    obstacles' hulls; off, the obstacles come first. Either way every detection sends both."""
+    import dataclasses
+    import threading
+    import time
+
+    from supportnode.client import ObstacleClusters, Publisher, Subscriber, SupportSurfaces
+
+    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
+    p = DetectParams()
+    node_p = dataclasses.replace(
+        p.node,
+        scan_endpoint=pub.endpoint,
+        pub_endpoint="tcp://127.0.0.1:*",
+        detect_process=False,
+        surfaces_first=surfaces_first,
+        map_period=0.0,
+    )
+    pose = _sensor_pose(0, 0, 1.5)
+    box = box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)
+    pts = np.vstack([_platform(rng, 0, 0), box]) - pose[:3, 3]
+    order = []
+    with Node(dataclasses.replace(p, node=node_p), incremental=False) as node:
+        node.open()
+        sub = Subscriber(["surfaces", "obstacles"], node.pub_endpoint, keep_newest=100)
+        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+        th.start()
+        time.sleep(0.5)  # slow joiner
+        for i in range(3):
+            pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+            deadline = time.monotonic() + 10
+            while len(order) < 2 * (i + 1) and time.monotonic() < deadline:
+                msg = sub.recv(0.2)
+                if isinstance(msg, SupportSurfaces | ObstacleClusters):
+                    order.append((msg.seq, type(msg).__name__, msg))
+        d = node.diagnostics()
+        node.stop()
+        th.join(5)
+        sub.close()
+    pub.close()
+    first, second = ("SupportSurfaces", "ObstacleClusters")[:: 1 if surfaces_first else -1]
+    assert [(s, k) for s, k, _ in order] == [(s, k) for s in (1, 2, 3) for k in (first, second)]
+    surfaces = [m for _, k, m in order if k == "SupportSurfaces"]
+    obstacles = [m for _, k, m in order if k == "ObstacleClusters"]
+    assert [round(s.height, 2) for s in surfaces[-1].surfaces] == [0.5]
+    assert obstacles[-1].clusters[0].surface_id == surfaces[-1].surfaces[0].id
+    assert surfaces[-1].surfaces[0].free_area < surfaces[-1].surfaces[0].area  # the box
+    assert 0 < d.latencies["receive_to_surfaces"].p50 <= d.latencies["receive_to_publish"].p99

@@ -135,6 +135,10 @@ def test_node_that_loses_its_worker_goes_on_detecting(rng, caplog):
             msg = sub.recv(0.2)
             if isinstance(msg, SupportSurfaces) and msg.stamp == pytest.approx(stamp):
                 got.append(msg)
+                # Surfaces go out first: the detection ends when its obstacles are described.
+                while node.counters["detections"] < len(got):
+                    assert time.monotonic() < deadline, f"detection {k} did not end"
+                    time.sleep(0.01)
                 return
         raise AssertionError(f"no surfaces for scan {k}")
 
@@ -169,3 +173,29 @@ def test_node_that_loses_its_worker_goes_on_detecting(rng, caplog):
     assert any("detection worker died" in r.getMessage() for r in caplog.records)
     for msg in got:
         assert sorted(round(s.height, 2) for s in msg.surfaces) == [0.0, 0.75]
+
+
+def test_surfaces_first_part_then_the_whole_detection(rng):
+    """Asked for surfaces first, the worker sends the surfaces and their free space before it
+    describes the objects; they equal the final result's. A failing callback in the parent
+    does not leave the final reply to be taken for the next detection's."""
+    pts = _scene(rng)
+    want = incremental.full(pts, DetectParams())
+    parts: list[incremental.Items] = []
+    w = _started()
+    try:
+        got = w.detect(pts, on_surfaces=parts.append)
+        assert len(parts) == 1 and parts[0].clusters == []
+        assert [s.to_dict() for s in parts[0].surfaces] == [s.to_dict() for s in want.surfaces]
+        assert [f.to_dict() for f in parts[0].free] == [f.to_dict() for f in want.free]
+        _same(got, want)
+
+        def fail(_: incremental.Items) -> None:
+            raise ValueError("planner gone")
+
+        with pytest.raises(ValueError, match="planner gone"):
+            w.detect(pts, on_surfaces=fail)
+        shifted = pts + (1.0, 0.0, 0.0)
+        _same(w.detect(shifted), incremental.full(shifted, DetectParams()))
+    finally:
+        w.close()

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from supportnode.geometry.objects import Cluster, ObjectResult
+from supportnode.geometry.objects import Cluster, ObjectResult, Segmentation
 from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import FreeSpaceParams
 
@@ -67,22 +67,27 @@ def free_space(
     """
     params = params or FreeSpaceParams()
     on_this = [i for i, cl in enumerate(clusters) if cl.surface_id == surface.id]
+    footprints = [np.asarray(clusters[i].footprint, np.float64).reshape(-1, 2) for i in on_this]
     if object_points is None:
         object_xy = None
+        extents = [(fp.min(axis=0), fp.max(axis=0)) for fp in footprints if len(fp)]
     else:
         object_xy = [np.asarray(object_points[i], dtype=np.float64)[:, :2] for i in on_this]
-    return _free_space(surface, [clusters[i] for i in on_this], object_xy, params)
+        extents = [(xy.min(axis=0), xy.max(axis=0)) for xy in object_xy if len(xy)]
+    return _free_space(surface, extents, object_xy, footprints, params)
 
 
 def _free_space(
     surface: Surface,
-    on_this: list[Cluster],
+    extents: list[tuple[np.ndarray, np.ndarray]],
     object_xy: list[np.ndarray] | None,
+    footprints: list[np.ndarray] | None,
     params: FreeSpaceParams,
 ) -> FreeSpace:
-    """:func:`free_space` of the surface given the clusters standing on it and their points'
-    x, y coordinates: a list of (P_i, >= 2) float64 arrays, metres, whose cells are occupied
-    (how the points are grouped does not matter), or None to fill the clusters' footprints."""
+    """:func:`free_space` of the surface given its objects: extents, the x, y box (lo (2,),
+    hi (2,)) of each; object_xy, their points' x, y coordinates, a list of (P_i, >= 2) float64
+    arrays, metres, whose cells are occupied (how the points are grouped does not matter), or
+    None to fill footprints, their (K_i, 2) convex footprints."""
     c = float(params.cell_size)
     vx, vy = (float(v) for v in surface.cell_size)
     cells = np.asarray(surface.cells, dtype=np.int64).reshape(-1, 2)
@@ -93,11 +98,9 @@ def _free_space(
     if len(cells):
         lo_parts.append(cells.min(axis=0) * [vx, vy])
         hi_parts.append((cells.max(axis=0) + 1) * [vx, vy])
-    for cl in on_this:
-        fp = np.asarray(cl.footprint, dtype=np.float64).reshape(-1, 2)
-        if len(fp):
-            lo_parts.append(fp.min(axis=0))
-            hi_parts.append(fp.max(axis=0))
+    for lo_xy, hi_xy in extents:
+        lo_parts.append(lo_xy)
+        hi_parts.append(hi_xy)
     if not lo_parts:
         return _empty(surface.id, c)
     lo = np.min(lo_parts, axis=0)
@@ -130,8 +133,8 @@ def _free_space(
             row = np.floor((xy[:, 1] - origin[1]) / c).astype(np.int64)
             objects[row.clip(0, h - 1), col.clip(0, w - 1)] = True
     else:
-        for cl in on_this:  # one iteration per object
-            _fill_convex(objects, np.asarray(cl.footprint, np.float64), origin, c)
+        for fp in footprints or []:  # one iteration per object
+            _fill_convex(objects, fp, origin, c)
     # The table is under its objects even where it has no points (occluded by them).
     surf |= objects
     surf[0, :] = surf[-1, :] = surf[:, 0] = surf[:, -1] = False  # the blocked border
@@ -180,26 +183,32 @@ def _free_space(
 
 def free_space_all(
     surfaces: SurfaceResult,
-    objects: ObjectResult,
+    objects: ObjectResult | Segmentation,
     points: np.ndarray,
     params: FreeSpaceParams | None = None,
 ) -> list[FreeSpace]:
     """Free space of every surface, in surface order.
 
-    points: (N, 3) float, metres, the cloud that ``objects.labels`` (N,) labels.
+    objects: the objects found on the surfaces, described or only segmented (free space needs
+    only which points belong to which object and where it stands). points: (N, 3) float,
+    metres, the cloud that ``objects.labels`` (N,) labels.
     """
     params = params or FreeSpaceParams()
     pts = np.asarray(points)
     lab = np.asarray(objects.labels)
-    clusters = objects.clusters
+    if isinstance(objects, Segmentation):
+        sids = [int(v) for v in objects.surface_ids]
+        box_lo, box_hi = objects.bbox_min[:, :2], objects.bbox_max[:, :2]
+    else:
+        sids = [-1 if cl.surface_id is None else int(cl.surface_id) for cl in objects.clusters]
+        box_lo = np.array([cl.bbox_min[:2] for cl in objects.clusters]).reshape(-1, 2)
+        box_hi = np.array([cl.bbox_max[:2] for cl in objects.clusters]).reshape(-1, 2)
     surfs = surfaces.surfaces
     # The points of all clusters standing on each surface, in one run per surface (what
     # free_space does with the clusters' points, their occupied cells, does not depend on the
     # grouping): one gather of the points on surfaces, not a sort and gather of all clusters.
     slot = {s.id: k for k, s in reversed(list(enumerate(surfs)))}  # first surface of an id
-    of_cluster = np.array(
-        [slot.get(cl.surface_id, len(surfs)) for cl in clusters] + [len(surfs)], dtype=np.int32
-    )
+    of_cluster = np.array([slot.get(s, len(surfs)) for s in sids] + [len(surfs)], dtype=np.int32)
     # Only the points of objects on a surface are sorted (labels -1 read the last entry):
     # the same runs, in the same order, as a stable sort of all points' keys.
     key = of_cluster[lab]
@@ -210,11 +219,12 @@ def free_space_all(
     bounds = np.searchsorted(key[by_key], np.arange(len(surfs) + 1))
     out = []
     for s in surfs:  # one iteration per surface
-        on_this = [cl for cl in clusters if cl.surface_id == s.id]
+        on_this = [i for i, sid in enumerate(sids) if sid == s.id]
+        extents = [(box_lo[i], box_hi[i]) for i in on_this]
         j = slot[s.id]  # its own index, unless an earlier surface has the same id
         rows = order[bounds[j] : bounds[j + 1]]
         xy = np.take(pts, rows, axis=0).astype(np.float64, copy=False)[:, :2]
-        out.append(_free_space(s, on_this, [xy], params))
+        out.append(_free_space(s, extents, [xy], None, params))
     return out
 
 

@@ -35,7 +35,14 @@ from supportnode.geometry.memo import Memo
 from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import ObjectParams
 
-__all__ = ["Cluster", "ObjectResult", "detect_objects"]
+__all__ = [
+    "Cluster",
+    "ObjectResult",
+    "Segmentation",
+    "describe_objects",
+    "detect_objects",
+    "segment_objects",
+]
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
 _BOTTOM_BAND = 0.02
@@ -143,6 +150,28 @@ class ObjectResult:
     stats: dict = field(default_factory=dict)
 
 
+@dataclass
+class Segmentation:
+    """Objects segmented but not yet described: what free space needs, before the hulls.
+
+    labels: (N,) int32 cluster id of each input point, -1 for none; ids are the final ones
+    (largest first), so :func:`describe_objects` only adds the clusters' geometry.
+    surface_ids: (C,) int64 surface under each cluster, -1 for none. bbox_min, bbox_max:
+    (C, 3) float64 axis-aligned boxes of the clusters' points, metres.
+    """
+
+    labels: np.ndarray
+    surface_ids: np.ndarray
+    bbox_min: np.ndarray
+    bbox_max: np.ndarray
+    stats: dict = field(default_factory=dict)
+    # For describe_objects: the clustered points grouped by cluster (old order) and the run
+    # [start, end) of each cluster in the new order.
+    _grouped: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
+    _runs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64), repr=False)
+    _heights: dict = field(default_factory=dict, repr=False)
+
+
 def detect_objects(
     points: np.ndarray,
     surfaces: SurfaceResult,
@@ -158,7 +187,19 @@ def detect_objects(
     memo: per-cluster results (splits, hulls) of the previous call, reused for clusters with
     the very same points (the node's map changes in a few places per scan); the same result.
     Raises InputError on a wrong shape, non-finite values or a label array of the wrong length.
+    The same as :func:`describe_objects` of :func:`segment_objects`.
     """
+    return describe_objects(segment_objects(points, surfaces, params, memo), memo)
+
+
+def segment_objects(
+    points: np.ndarray,
+    surfaces: SurfaceResult,
+    params: ObjectParams | None = None,
+    memo: Memo | None = None,
+) -> Segmentation:
+    """The first half of :func:`detect_objects` (same arguments and errors): clusters, their
+    order, labels and supporting surfaces, without the hulls and boxes that describe them."""
     params = params or ObjectParams()
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -193,15 +234,27 @@ def detect_objects(
         lab = _split_touching(cp, lab, params, stats, memo)
     t2 = time.perf_counter()
 
-    clusters, lab = _describe(cp, lab, lookups[1], params, memo)
+    seg = _order(cp, lab, lookups[1], params)
     labels = np.full(len(pts), -1, dtype=np.int32)
-    labels[cand] = lab
-    stats["clusters"] = len(clusters)
-    stats["labelled_points"] = int((lab >= 0).sum())
+    labels[cand] = seg.labels
+    seg.labels = labels
+    seg.stats = stats
+    stats["clusters"] = len(seg.surface_ids)
+    stats["labelled_points"] = int((labels >= 0).sum())
     stats["time_cluster_s"] = t1 - t0
     stats["time_split_s"] = t2 - t1
-    stats["time_describe_s"] = time.perf_counter() - t2
-    return ObjectResult(clusters=clusters, labels=labels, stats=stats)
+    stats["time_order_s"] = time.perf_counter() - t2
+    return seg
+
+
+def describe_objects(seg: Segmentation, memo: Memo | None = None) -> ObjectResult:
+    """The second half of :func:`detect_objects`: the clusters of ``seg`` described (hulls,
+    oriented boxes, heights). memo: as for detect_objects."""
+    t = time.perf_counter()
+    clusters = _describe(seg, memo)
+    stats = dict(seg.stats)
+    stats["time_describe_s"] = time.perf_counter() - t + stats.pop("time_order_s", 0.0)
+    return ObjectResult(clusters=clusters, labels=seg.labels, stats=stats)
 
 
 # ------------------------------------------------------------------------------------ clustering
@@ -911,20 +964,18 @@ def _split_footprint(
 # --------------------------------------------------------------------------------- descriptions
 
 
-def _describe(
-    cp: np.ndarray,
-    lab: np.ndarray,
-    lookups: list[_SupportLookup],
-    params: ObjectParams,
-    memo: Memo | None = None,
-) -> tuple[list[Cluster], np.ndarray]:
-    """Sort clusters largest first, renumber lab accordingly, and describe each cluster.
+def _order(
+    cp: np.ndarray, lab: np.ndarray, lookups: list[_SupportLookup], params: ObjectParams
+) -> Segmentation:
+    """Clusters of lab (M,) over cp (M, 3) sorted largest first, their labels renumbered
+    accordingly (``labels`` of the result is (M,) here) and their supporting surfaces.
 
     lookups: the (dilated) footprint lookups of the surfaces the clusters may stand on.
     """
     out = np.full(len(lab), -1, dtype=np.int64)
     if len(lab) == 0 or lab.max() < 0:
-        return [], out
+        none = np.zeros((0, 3))
+        return Segmentation(out, np.zeros(0, np.int64), none, none.copy())
     n = int(lab.max()) + 1
     # One stable sort by label: each cluster's points are then a contiguous run, in input order.
     grouped = _group_by_label(lab)
@@ -944,14 +995,31 @@ def _describe(
     new_id[order] = np.arange(len(order))
     ok = lab >= 0
     out[ok] = new_id[lab[ok]]
-
-    groups = [in_clusters[bounds[c] - bounds[0] : bounds[c + 1] - bounds[0]] for c in order]
+    # Each cluster's run of in_clusters, in the new order.
+    runs = np.stack([bounds[order] - bounds[0], bounds[order + 1] - bounds[0]], axis=1)
+    groups = [in_clusters[a:b] for a, b in runs.tolist()]  # one slice per cluster
     sids = _supports(groups, lookups, params.support_tolerance)
-    height_of = {lk.id: lk.height for lk in lookups}
+    return Segmentation(
+        out,
+        sids,
+        mins[order],
+        maxs[order],
+        _grouped=in_clusters,
+        _runs=runs,
+        _heights={lk.id: lk.height for lk in lookups},
+    )
+
+
+def _describe(seg: Segmentation, memo: Memo | None = None) -> list[Cluster]:
+    """Hulls, oriented boxes and heights of the clusters of seg, in its order."""
+    if len(seg.surface_ids) == 0:
+        return []
+    runs = seg._runs.tolist()
+    groups = [seg._grouped[a:b] for a, b in runs]  # one slice per cluster
     # Coordinates as rows (3, P): each cluster's centroid is then one cumsum along contiguous
     # rows (see _make_cluster).
-    rows = np.ascontiguousarray(in_clusters.T)
-    lo, hi = mins[order], maxs[order]  # bounding boxes: the same min / max as per cluster
+    rows = np.ascontiguousarray(seg._grouped.T)
+    lo, hi = seg.bbox_min, seg.bbox_max  # bounding boxes: the same min / max as per cluster
     if memo is None:
         hulls = [_hulls(p, lo[cid], hi[cid]) for cid, p in enumerate(groups)]  # per cluster
     else:  # lo, hi are p's own bounds: a pure function of p
@@ -961,22 +1029,21 @@ def _describe(
         ]  # per cluster
     # The hulls, never the raw points: the edge search is quadratic in the vertices.
     rects = _oriented_rects([footprint for footprint, _ in hulls])
-    clusters = [
+    return [
         _make_cluster(
             cid,
-            rows[:, bounds[c] - bounds[0] : bounds[c + 1] - bounds[0]],
+            rows[:, runs[cid][0] : runs[cid][1]],
             lo[cid],
             hi[cid],
             None if sid < 0 else int(sid),
-            height_of,
+            seg._heights,
             hull,
             rect,
         )
-        for cid, (c, sid, hull, rect) in enumerate(
-            zip(order, sids, hulls, rects, strict=True)
+        for cid, (sid, hull, rect) in enumerate(
+            zip(seg.surface_ids.tolist(), hulls, rects, strict=True)
         )  # per cluster
     ]
-    return clusters, out
 
 
 def _group_by_label(lab: np.ndarray) -> np.ndarray:

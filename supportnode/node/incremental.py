@@ -28,7 +28,7 @@ import numpy as np
 from supportnode.geometry.freespace import FreeSpace
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects import Cluster
-from supportnode.geometry.surfaces import Surface
+from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import DetectParams
 from supportnode.pipeline import detect
 
@@ -63,9 +63,19 @@ def _meets(lo: np.ndarray, hi: np.ndarray, blo: np.ndarray, bhi: np.ndarray, m: 
 
 
 def _from_detection(
-    points: np.ndarray, params: DetectParams, origin: np.ndarray | None, memo: Memo | None = None
+    points: np.ndarray,
+    params: DetectParams,
+    origin: np.ndarray | None,
+    memo: Memo | None = None,
+    on_surfaces: Callable[[Items], None] | None = None,
 ) -> Items:
-    d = detect(points, params, sensor_origin=origin, memo=memo)
+    early = None
+    if on_surfaces is not None:
+
+        def early(surfaces: SurfaceResult, free: list[FreeSpace], _: object) -> None:
+            on_surfaces(Items(surfaces=list(surfaces.surfaces), free=list(free)))
+
+    d = detect(points, params, sensor_origin=origin, memo=memo, on_surfaces=early)
     clusters = d.objects.clusters if d.objects is not None else []
     labels = d.objects.labels if d.objects is not None else np.zeros(0, np.int32)
     return Items(
@@ -98,10 +108,13 @@ def full(
     params: DetectParams,
     origin: np.ndarray | None = None,
     memo: Memo | None = None,
+    on_surfaces: Callable[[Items], None] | None = None,
 ) -> Items:
     """Detection on all of ``points`` (N, 3), metres, z up; memo: per-item results of the
-    previous detections (the same result, sooner)."""
-    return _from_detection(points, params, origin, memo)
+    previous detections (the same result, sooner). on_surfaces: called, before the objects
+    are described, with Items holding only the surfaces and their free space (the same as
+    the result's)."""
+    return _from_detection(points, params, origin, memo, on_surfaces)
 
 
 def regional(

@@ -13,6 +13,8 @@ that is due within a scan period (see `_detect_loop`). The detection thread hand
 points to a worker process (``node.detect_process``, `supportnode.node.worker`), so that the
 merge and the detection do not take turns at one interpreter lock. If the worker dies, the
 thread detects by itself meanwhile and the worker is restarted (at most _WORKER_RESTARTS times).
+With ``node.surfaces_first`` a detection's surfaces and their free space go out as soon as they
+are known, and its obstacles (same ``seq``) once their hulls and boxes are computed.
 
     with Node(load_config("config/default.yaml")) as node:
         out = node.process(cloud)            # NodeOutput: SupportSurfaces, ObstacleClusters
@@ -122,6 +124,18 @@ class NodeOutput:
     incremental: bool = False
     items: Items | None = None
     reused: bool = False
+    surfaces_sent: bool = False  # published already, ahead of the obstacles (surfaces_first)
+
+
+@dataclass
+class _SurfaceOut:
+    """The surfaces' part of a detection's output (see Node._surface_message)."""
+
+    message: SupportSurfaces
+    kept_ids: set[int]  # detection ids of the surfaces kept (below the sensor)
+    sid: dict[int, int]  # detection id -> stable id of the kept surfaces
+    new: list[int]  # stable ids that appeared
+    gone: list[int]  # stable ids that vanished
 
 
 @dataclass
@@ -390,8 +404,17 @@ class Node(Closing):
             lo, hi = np.minimum(lo, self._pending[0]), np.maximum(hi, self._pending[1])
         self._pending = (lo, hi)
 
-    def _detect_job(self, job: _Job, timings: dict[str, float]) -> NodeOutput | None:
-        """Detection on the map as it is now, for the newest ingested scan ``job``."""
+    def _detect_job(
+        self,
+        job: _Job,
+        timings: dict[str, float],
+        publish_surfaces: Callable[[SupportSurfaces], None] | None = None,
+    ) -> NodeOutput | None:
+        """Detection on the map as it is now, for the newest ingested scan ``job``.
+
+        publish_surfaces: when given, a full detection calls it with the SupportSurfaces
+        message as soon as the surfaces and their free space are known (the obstacles are
+        still being described); the result then has ``surfaces_sent``."""
         with self._lock:
             rotation = self.gravity.rotation
             region, self._pending = self._pending, None
@@ -431,19 +454,32 @@ class Node(Closing):
         elif self.incremental and self._items is not None and same_frame:
             items = incremental.regional_from(fetch, self._items, lo, hi, self.params)
         is_incremental = items is not None and not reused
+        sensor_z = float((rotation @ job.pose[:3, 3])[2])
+        early: list[_SurfaceOut] = []
         if items is None:
             t = time.perf_counter()
             with self._lock:
                 raw = self.map.points()
             points = raw if level else transform_points(raw, rotation)
             fetch_time[0] += time.perf_counter() - t
-            items = self._full(points)
+            on_surfaces = None
+            if publish_surfaces is not None:
+
+                def on_surfaces(part: Items) -> None:
+                    with self._track_lock:
+                        if job.generation != self._generation:
+                            return  # reset meanwhile: the final result is dropped too
+                        early.append(
+                            self._surface_message(part, sensor_z, job.stamp, job.frame, timings)
+                        )
+                    publish_surfaces(early[0].message)
+
+            items = self._full(points, on_surfaces)
             if items is None:
                 return None  # stopped while the worker was detecting
         if not reused:
             timings["points"] = fetch_time[0]
             timings.update({k: v for k, v in items.timings.items()})
-        sensor_z = float((rotation @ job.pose[:3, 3])[2])
         with self._track_lock:  # a reset (source restarted) must not interleave with this
             if job.generation != self._generation:
                 return None  # the map was reset while this ran: the result is stale
@@ -451,13 +487,25 @@ class Node(Closing):
             self.counters["detections"] += 1
             self.counters["incremental_detections"] += int(is_incremental)
             self.counters["detections_reused"] += int(reused)
-            out = self._messages(items, sensor_z, job.stamp, job.frame, timings, is_incremental)
+            out = self._messages(
+                items,
+                sensor_z,
+                job.stamp,
+                job.frame,
+                timings,
+                is_incremental,
+                early[0] if early else None,
+            )
             out.reused = reused
+            out.surfaces_sent = bool(early)
             return out
 
-    def _full(self, points: np.ndarray) -> Items | None:
+    def _full(
+        self, points: np.ndarray, on_surfaces: Callable[[Items], None] | None = None
+    ) -> Items | None:
         """Full detection on (N, 3) detection-frame points: in the worker process when it
-        is up, else in this thread. None when the node stopped during the detection."""
+        is up, else in this thread. None when the node stopped during the detection.
+        on_surfaces: see `incremental.full`."""
         self._start_worker_when_due()
         w = self._worker
         try:
@@ -465,7 +513,7 @@ class Node(Closing):
                 if self._worker_logged != w.pid:
                     self._worker_logged = w.pid
                     self.log.info("detection worker ready (pid %d)", w.pid)
-                items = w.detect(points, self._stop)
+                items = w.detect(points, self._stop, on_surfaces)
                 self.counters["worker_detections"] += 1
                 return items
         except WorkerError as err:
@@ -482,7 +530,7 @@ class Node(Closing):
             )
             if again:
                 self._worker_restart_at = time.monotonic() + _WORKER_RESTART_S
-        return incremental.full(points, self.params, memo=self._memo)
+        return incremental.full(points, self.params, memo=self._memo, on_surfaces=on_surfaces)
 
     def _start_worker_when_due(self) -> None:
         due = self._worker_restart_at
@@ -495,27 +543,18 @@ class Node(Closing):
         except WorkerError as err:
             self.log.warning("%s; detecting in the node's thread", err)
 
-    def _messages(
-        self,
-        items: Items,
-        sensor_z: float,
-        stamp: float,
-        frame: str,
-        timings: dict[str, float],
-        is_incremental: bool,
-    ) -> NodeOutput:
+    def _surface_message(
+        self, items: Items, sensor_z: float, stamp: float, frame: str, timings: dict[str, float]
+    ) -> _SurfaceOut:
+        """Stable ids and the SupportSurfaces message of a detection's surfaces (its clusters
+        are not needed: free space is in ``items.free``). Call with the track lock held."""
         t = time.perf_counter()
         # Horizontal planes above the sensor are ceilings and undersides, not supports.
         keep = [s for s in items.surfaces if s.height < sensor_z - 0.05]
         kept_ids = {s.id for s in keep}
         s_up = self.surface_tracker.update_surfaces(keep)
         sid = {s.id: int(i) for s, i in zip(keep, s_up.ids, strict=True)}
-        surface_of = np.array(
-            [sid.get(c.surface_id, -1) if c.surface_id is not None else -1 for c in items.clusters],
-            dtype=np.int64,
-        )
-        c_up = self.cluster_tracker.update_clusters(items.clusters, surface_of)
-        timings["track"] = time.perf_counter() - t
+        timings["track"] = timings.get("track", 0.0) + time.perf_counter() - t
 
         t = time.perf_counter()
         tracks = self.surface_tracker.tracks
@@ -525,11 +564,38 @@ class Node(Closing):
         ]
         self._out_seq += 1
         free = [f for f in items.free if f.surface_id in kept_ids]
-        surfaces = SupportSurfaces.from_detection(
+        message = SupportSurfaces.from_detection(
             keep, free, stamp, frame, self._out_seq, ids=[int(i) for i in s_up.ids], safe=safe
         )
+        timings["messages"] = timings.get("messages", 0.0) + time.perf_counter() - t
+        return _SurfaceOut(message, kept_ids, sid, list(s_up.new), list(s_up.gone))
+
+    def _messages(
+        self,
+        items: Items,
+        sensor_z: float,
+        stamp: float,
+        frame: str,
+        timings: dict[str, float],
+        is_incremental: bool,
+        surface_out: _SurfaceOut | None = None,
+    ) -> NodeOutput:
+        """Both messages of a detection; surface_out: its surfaces' part, when already made."""
+        so = surface_out or self._surface_message(items, sensor_z, stamp, frame, timings)
+        t = time.perf_counter()
+        surface_of = np.array(
+            [
+                so.sid.get(c.surface_id, -1) if c.surface_id is not None else -1
+                for c in items.clusters
+            ],
+            dtype=np.int64,
+        )
+        c_up = self.cluster_tracker.update_clusters(items.clusters, surface_of)
+        timings["track"] = timings.get("track", 0.0) + time.perf_counter() - t
+
+        t = time.perf_counter()
         clusters = [
-            c if c.surface_id is None or c.surface_id in kept_ids else _unsupported(c)
+            c if c.surface_id is None or c.surface_id in so.kept_ids else _unsupported(c)
             for c in items.clusters
         ]
         obstacles = ObstacleClusters.from_detection(
@@ -538,17 +604,17 @@ class Node(Closing):
             frame,
             self._out_seq,
             ids=[int(i) for i in c_up.ids],
-            surface_ids=sid,
+            surface_ids=so.sid,
             points=items.cluster_points,
         )
-        timings["messages"] = time.perf_counter() - t
-        self._last_counts = (len(keep), len(clusters))
+        timings["messages"] = timings.get("messages", 0.0) + time.perf_counter() - t
+        self._last_counts = (len(so.kept_ids), len(clusters))
         return NodeOutput(
-            surfaces,
+            so.message,
             obstacles,
             timings,
-            new_ids={"surfaces": list(s_up.new), "obstacles": list(c_up.new)},
-            gone_ids={"surfaces": list(s_up.gone), "obstacles": list(c_up.gone)},
+            new_ids={"surfaces": so.new, "obstacles": list(c_up.new)},
+            gone_ids={"surfaces": so.gone, "obstacles": list(c_up.gone)},
             incremental=is_incremental,
             items=items,
         )
@@ -792,8 +858,14 @@ class Node(Closing):
                 job, self._job = self._job, None
             timings: dict[str, float] = {}
             t = time.perf_counter()
+            early = None
+            if self.cfg.surfaces_first:
+
+                def early(msg: SupportSurfaces, t_recv: float = job.t_recv) -> None:
+                    self._publish_surfaces(msg, t_recv)
+
             try:
-                out = self._detect_job(job, timings)
+                out = self._detect_job(job, timings, early)
             except Exception as err:
                 self.log.exception("scan at %.3f: internal error in detection", job.stamp)
                 self._reject("internal_error", f"detection: {type(err).__name__}: {err}")
@@ -807,17 +879,34 @@ class Node(Closing):
             self._publish(out, job.t_recv)
 
     def _publish(self, out: NodeOutput, t_recv: float) -> None:
+        """Send a detection's messages: obstacles then surfaces, or with node.surfaces_first
+        surfaces (unless they went out ahead, ``surfaces_sent``) then obstacles."""
         assert self._pub is not None and out.surfaces is not None and out.obstacles is not None
         t = time.perf_counter()
         obstacles = out.obstacles.encode(self.cfg.obstacles_topic)
-        surfaces = out.surfaces.encode(self.cfg.surfaces_topic)
+        surfaces = None if out.surfaces_sent else out.surfaces.encode(self.cfg.surfaces_topic)
         with self._pub_lock:  # ZeroMQ sockets are not thread-safe
-            # Surfaces last: a planner that reacts to surfaces then already has their obstacles.
+            if surfaces is not None and self.cfg.surfaces_first:
+                self._pub.send(surfaces)  # a reused or regional detection: one order always
+                surfaces = None
+            # Else surfaces last: a planner that reacts to surfaces has their obstacles.
             self._pub.send(obstacles)
-            self._pub.send(surfaces)
+            if surfaces is not None:
+                self._pub.send(surfaces)
         out.timings["publish"] = time.perf_counter() - t
         self.latency.add("publish", out.timings["publish"])
-        self.latency.add("receive_to_publish", time.perf_counter() - t_recv)
+        done = time.perf_counter() - t_recv
+        self.latency.add("receive_to_publish", done)
+        if surfaces is not None:
+            self.latency.add("receive_to_surfaces", done)
+
+    def _publish_surfaces(self, msg: SupportSurfaces, t_recv: float) -> None:
+        """Send a SupportSurfaces message ahead of its obstacles (node.surfaces_first)."""
+        assert self._pub is not None
+        frames = msg.encode(self.cfg.surfaces_topic)
+        with self._pub_lock:
+            self._pub.send(frames)
+        self.latency.add("receive_to_surfaces", time.perf_counter() - t_recv)
 
     def diagnostics(self) -> Diagnostics:
         """The current Diagnostics message (counters, latencies, gauges, status)."""

@@ -18,9 +18,10 @@ stopping the node, signals the whole process group, and the parent decides when 
 stops (a worker dying first would look like a crash to the node).
 
 Wire: a socket pair wrapped in `multiprocessing.connection.Connection` (framed messages).
-Parent to worker: `DetectParams`, then per detection a header (shape, dtype) and the raw
-point bytes. Worker to parent: ``("ready", pid)`` once, then per detection
-``("ok", items, seconds)`` or ``("error", text)``.
+Parent to worker: `DetectParams`, then per detection a header (shape, dtype, surfaces first)
+and the raw point bytes. Worker to parent: ``("ready", pid)`` once, then per detection
+``("surfaces", items)`` when asked for surfaces first (Items with the surfaces and their free
+space only), then ``("ok", items, seconds)`` or ``("error", text)``.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from multiprocessing.connection import Connection
 
 import numpy as np
@@ -99,24 +101,32 @@ class DetectionWorker:
             raise WorkerError(f"detection worker ended while starting ({self._exit()})") from err
         return self._ready
 
-    def detect(self, points: np.ndarray, stop: threading.Event | None = None) -> Items:
-        """`incremental.full` of (N, 3) points in the worker; raises WorkerError when the
-        worker is gone or ``stop`` is set while waiting, RuntimeError for an error in the
-        detection itself (the worker goes on)."""
+    def detect(
+        self,
+        points: np.ndarray,
+        stop: threading.Event | None = None,
+        on_surfaces: Callable[[Items], None] | None = None,
+    ) -> Items:
+        """`incremental.full` of (N, 3) points in the worker (on_surfaces as there, called
+        in this thread); raises WorkerError when the worker is gone or ``stop`` is set while
+        waiting, RuntimeError for an error in the detection itself (the worker goes on)."""
         if not self.ready() or self._conn is None:
             raise WorkerError("detection worker not ready")
         pts = np.ascontiguousarray(points)
         t0 = time.perf_counter()
         try:
-            self._conn.send((pts.shape, pts.dtype.str))
+            self._conn.send((pts.shape, pts.dtype.str, on_surfaces is not None))
             self._conn.send_bytes(pts)
-            while not self._conn.poll(_POLL_S):
-                if stop is not None and stop.is_set():
-                    self.close()
-                    raise WorkerError("stopped while the worker was detecting")
-                if self._proc.poll() is not None:
-                    raise EOFError
-            reply = self._conn.recv()
+            reply = self._reply(stop)
+            if reply[0] == "surfaces":
+                assert on_surfaces is not None
+                try:
+                    on_surfaces(reply[1])
+                except BaseException:
+                    # The final reply is on its way: read it, or the next detection takes it.
+                    self._reply(stop)
+                    raise
+                reply = self._reply(stop)
         except (EOFError, OSError, pickle.UnpicklingError) as err:
             self.close()
             raise WorkerError(f"detection worker died ({self._exit()})") from err
@@ -128,6 +138,16 @@ class DetectionWorker:
         # The cost of the process boundary: the round trip less the detection in the worker.
         items.timings["worker_io"] = t2 - t0 - float(reply[2])
         return items
+
+    def _reply(self, stop: threading.Event | None) -> tuple:
+        assert self._conn is not None
+        while not self._conn.poll(_POLL_S):
+            if stop is not None and stop.is_set():
+                self.close()
+                raise WorkerError("stopped while the worker was detecting")
+            if self._proc.poll() is not None:
+                raise EOFError
+        return self._conn.recv()
 
     def rss_mb(self) -> float:
         """Resident memory of the worker in MiB (Linux /proc); NaN when unknown."""
@@ -166,14 +186,15 @@ def _serve(conn: Connection) -> int:
     conn.send(("ready", os.getpid()))
     while True:
         try:
-            shape, dtype = conn.recv()
+            shape, dtype, surfaces_first = conn.recv()
             points = np.empty(shape, np.dtype(dtype))
             conn.recv_bytes_into(points.reshape(-1))  # 1-D: the buffer's length is its size
         except (EOFError, OSError):
             return 0  # the parent closed the connection or died
         t = time.perf_counter()
         try:
-            items = incremental.full(points, params, memo=memo)
+            early = (lambda part: conn.send(("surfaces", part))) if surfaces_first else None
+            items = incremental.full(points, params, memo=memo, on_surfaces=early)
         except Exception as err:  # reported to the parent, which logs and counts it
             traceback.print_exc()
             conn.send(("error", f"{type(err).__name__}: {err}"))
