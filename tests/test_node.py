@@ -413,3 +413,61 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
     assert obstacles[-1].clusters[0].surface_id == surfaces[-1].surfaces[0].id
     assert surfaces[-1].surfaces[0].free_area < surfaces[-1].surfaces[0].area  # the box
     assert 0 < d.latencies["receive_to_surfaces"].p50 <= d.latencies["receive_to_publish"].p99
+
+
+def test_removed_object_leaves_the_results_over_sockets(rng):
+    """`spin` with its detection worker: a box taken away leaves the published obstacles
+    within a few scans, and the map counts what it cleared."""
+    import dataclasses
+    import threading
+    import time
+
+    from supportnode.client import ObstacleClusters, Publisher, Subscriber
+
+    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
+    p = DetectParams()
+    node_p = dataclasses.replace(
+        p.node, scan_endpoint=pub.endpoint, pub_endpoint="tcp://127.0.0.1:*", map_period=0.0
+    )
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    board = lambda: _platform(rng, 0, 0, n=8000)  # noqa: E731
+    box = lambda: box_points(rng, (0.0, 0.0, 0.65), (0.3, 0.3, 0.3), 4000)  # noqa: E731
+    wall = lambda: np.c_[  # noqa: E731
+        np.full(6000, 2.0), rng.uniform(-1, 1, 6000), rng.uniform(0.0, 1.5, 6000)
+    ]
+    at_box = lambda m: [c for c in m.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]  # noqa: E731
+    seen = []
+    with Node(dataclasses.replace(p, node=node_p), incremental=False) as node:
+        node.open()
+        sub = Subscriber("obstacles", node.pub_endpoint, keep_newest=100)
+        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+        th.start()
+        try:
+            deadline = time.monotonic() + 60
+            time.sleep(0.5)  # slow joiner
+            while node._worker is None or not node._worker.ready():
+                assert time.monotonic() < deadline, "worker did not start"
+                time.sleep(0.05)
+            for i in range(14):
+                parts = [board(), box(), wall()] if i < 3 else [board(), wall()]
+                stamp = 1.0 + 0.1 * i
+                pub.publish(_cloud(np.vstack(parts) - pose[:3, 3], stamp, seq=i + 1, pose=pose))
+                deadline = time.monotonic() + 20
+                while True:
+                    msg = sub.recv(0.2)
+                    if isinstance(msg, ObstacleClusters) and msg.stamp == pytest.approx(stamp):
+                        seen.append(len(at_box(msg)))
+                        break
+                    assert time.monotonic() < deadline, f"no obstacles for scan {i}"
+                if i >= 3 and seen[-1] == 0:
+                    break
+            d = node.diagnostics()
+        finally:
+            node.stop()
+            th.join(5)
+            sub.close()
+    pub.close()
+    assert seen[2] >= 1 and seen[-1] == 0, seen
+    c = d.counters
+    assert c["map_cleared"] > 0 and c["detections"] == len(seen), c
+    assert c["worker_detections"] + c["detections_reused"] == len(seen), c
