@@ -3,7 +3,7 @@ drops and memory at twice the input rate, accuracy and id switches on simulated 
 
     python bench/bench_node.py [--scene kitchen] [--frames 30] [--lidar os128|vlp16]
                                [--only stages,e2e,standing,growth,rate,ids]
-                               [--map-points recent] [--in-process]
+                               [--map-points recent] [--in-process] [--set KEY=VALUE ...]
 
 Prints one JSON object per part. The lidar is the simulator's os128 (128 x 1024 = 131,072
 rays; a scan holds as many points as rays hit something).
@@ -15,6 +15,7 @@ import argparse
 import dataclasses
 import json
 import multiprocessing as mp
+import os
 import socket
 import subprocess
 import sys
@@ -24,17 +25,30 @@ import warnings
 
 import numpy as np
 
+import supportnode
 from supportnode.client import Publisher, Subscriber, SupportSurfaces, pose_from_matrix
+from supportnode.config import load_config
+from supportnode.errors import SupportNodeError
 from supportnode.msgs import PointCloud
 from supportnode.node.allocator import retain_freed_memory
 from supportnode.node.map import VoxelMap
 from supportnode.node.node import Node
+from supportnode.params import DetectParams
 from supportnode.sim import Lidar, load_scene, parse_scene, poses_for
 from supportnode.sim.noise import NoiseSpec
 from supportnode.sim.scene import scene_path
 from supportnode.sim.simulate import scans
 
 warnings.filterwarnings("ignore", category=RuntimeWarning)
+
+# --set KEY=VALUE overrides (the node's configuration for every part), and the parameters
+# they give; set by main.
+SETS: list[str] = []
+PARAMS = DetectParams()
+# The source tree of the supportnode this script imported: `supportnode run` is started from
+# it, so that a benchmark run with PYTHONPATH=<a worktree> measures that worktree's node (with
+# `python -m`, the working directory comes first on the path).
+SOURCE = os.path.dirname(os.path.dirname(os.path.abspath(supportnode.__file__)))
 
 
 # The kitchen with a front wall and a ceiling: every ray of the os128 hits, 131,072 points a scan.
@@ -68,7 +82,7 @@ def _pct(x) -> dict:
 
 def stages(sc) -> dict:
     """In-process: per-stage latency over the sequence (the first 3 scans warm up)."""
-    with Node() as node:
+    with Node(PARAMS) as node:
         rows = [node.process(_cloud(s, 0.1 * i, i + 1)).timings for i, s in enumerate(sc)][3:]
     keys = rows[0].keys()
     return {
@@ -83,7 +97,7 @@ def growth(sc, factor: int = 10) -> dict:
     radius, apart from the scene). The first scans (full detection) are left out."""
     out = {}
     for extra in (False, True):
-        with Node() as node:
+        with Node(PARAMS) as node:
             if extra:
                 target = factor * _base_voxels(sc)
                 rng = np.random.default_rng(0)
@@ -110,7 +124,7 @@ def growth(sc, factor: int = 10) -> dict:
 def _base_voxels(sc) -> int:
     from supportnode.node.map import VoxelMap
 
-    m = VoxelMap()
+    m = VoxelMap(PARAMS.node.map)
     for i, s in enumerate(sc):
         m.integrate(s.points, s.sensor_pose, 0.1 * i)
     return len(m)
@@ -155,13 +169,17 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0, in_process: bool = False) -
     driver = ctx.Process(target=_drive, args=(sc, scan_ep, rate, go), daemon=True)
     driver.start()
     sets = [
+        *SETS,
         f"node.scan_endpoint={scan_ep}",
         f"node.pub_endpoint={pub_ep}",
         "node.diagnostics_period=0.5",
     ]
+    path = os.pathsep.join(p for p in (SOURCE, os.environ.get("PYTHONPATH")) if p)
     node = subprocess.Popen(
         [sys.executable, "-m", "supportnode", "run", "--log-level", "WARNING"]
-        + [a for kv in sets for a in ("--set", kv)]
+        + [a for kv in sets for a in ("--set", kv)],
+        cwd=SOURCE,
+        env={**os.environ, "PYTHONPATH": path},
     )
     sub = Subscriber(["surfaces", "diagnostics"], pub_ep, keep_newest=100)
     lat: list[float] = []
@@ -226,10 +244,8 @@ def _e2e_summary(rate, sent, d, lat, rss, mode) -> dict:
 def _e2e_in_process(sc, rate: float, slow_consumer: float = 0.0) -> dict:
     from dataclasses import replace
 
-    from supportnode.params import DetectParams
-
     pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=2)
-    p = DetectParams()
+    p = PARAMS
     p = replace(
         p,
         node=replace(
@@ -298,7 +314,9 @@ def ids(scene_name: str, frames: int, map_points: str = "stable") -> dict:
     s_ids: dict[int, list[int]] = {k: [] for k in gt_s}
     o_ids: dict[int, list[int]] = {k: [] for k in gt_o}
     s_found, o_found = [], []
-    with Node(map_factory=lambda: VoxelMap(None, representation=map_points)) as node:
+    with Node(
+        PARAMS, map_factory=lambda: VoxelMap(PARAMS.node.map, representation=map_points)
+    ) as node:
         for i, s in enumerate(sc):
             out = node.process(_cloud(s, 0.1 * i, i + 1))
             hits = 0
@@ -377,7 +395,20 @@ def main() -> None:
         action="store_true",
         help="leave glibc's allocator as it is (supportnode run keeps freed memory)",
     )
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="configuration override for the node in every part, as for supportnode run",
+    )
     args = ap.parse_args()
+    global PARAMS
+    try:
+        PARAMS = load_config(None, args.set)
+    except SupportNodeError as err:
+        ap.error(str(err))
+    SETS[:] = args.set
     if not (np.isfinite(args.noise) and args.noise >= 0):
         ap.error(f"--noise: expected a finite number >= 0, got {args.noise}")
     if not args.default_malloc:

@@ -18,6 +18,11 @@ BENCH = Path(__file__).resolve().parent.parent / "bench" / "bench_node.py"
         (["--noise", "nan"], "--noise: expected a finite number >= 0, got nan"),
         (["--only", "e2e,bogus"], "--only: unknown part(s) bogus"),
         (["--map-points", "centroid"], "argument --map-points: invalid choice: 'centroid'"),
+        (
+            ["--set", "node.map.radiuss=3"],
+            "unknown key 'node.map.radiuss' (did you mean 'radius'?)",
+        ),
+        (["--set", "node.surfaces_first=maybe"], "node.surfaces_first: expected true or false"),
     ],
 )
 def test_bad_flags_are_one_line_errors(args, message):
@@ -28,3 +33,45 @@ def test_bad_flags_are_one_line_errors(args, message):
     last = proc.stderr.strip().splitlines()[-1]
     assert last.startswith("bench_node.py: error: ") and message in last
     assert "Traceback" not in proc.stderr and proc.stdout == ""
+
+
+AB = BENCH.parent / "ab.py"
+
+
+def test_ab_pairs_two_sides_and_reports_medians_and_differences(tmp_path):
+    """bench/ab.py runs both sides by turns and reports each number of the script's JSON
+    lines: median of A, of B, and the paired difference."""
+    script = tmp_path / "fake_bench.py"
+    script.write_text(
+        "import json, sys\n"
+        "v = float(sys.argv[sys.argv.index('--v') + 1])\n"
+        "print('not json')\n"
+        "print(json.dumps({'e2e': {'latency': {'p50_ms': v, 'p99_ms': 2 * v}, 'ok': True}}))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, str(AB), "--reps", "2", "--a-args", "--v 10", "--b-args", "--v 7",
+         "--keys", "p50,p99", "--", str(script)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    rows = {ln.split()[0]: ln.split()[1:] for ln in proc.stdout.splitlines() if "latency" in ln}
+    assert [float(x) for x in rows["e2e.latency.p50_ms"]] == [10.0, 7.0, -3.0, 0.7]
+    assert [float(x) for x in rows["e2e.latency.p99_ms"]] == [20.0, 14.0, -6.0, 0.7]
+    assert "e2e.ok" not in proc.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--a", "no-such-revision", "--", str(BENCH)], "--a no-such-revision"),
+        (["--", "bench/missing.py"], "no such script: bench/missing.py"),
+        (["--reps", "0", "--", str(BENCH)], "--reps: expected at least 1, got 0"),
+        ([], "no benchmark script"),
+    ],
+)
+def test_ab_bad_arguments_are_one_line_errors(args, message):
+    proc = subprocess.run(
+        [sys.executable, str(AB), *args], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode != 0 and message in proc.stderr.strip().splitlines()[-1]
+    assert "Traceback" not in proc.stderr
