@@ -1,8 +1,10 @@
 """Where does an object fit? A planner's view of the node's results, printed live.
 
-Subscribes to the node's SupportSurfaces and ObstacleClusters and, for every surface message,
-prints each safe surface (id, height, free area, largest free disc) with "fits" or "does not
-fit" for an object of footprint radius ``--radius``, then the obstacles standing on it:
+Subscribes to the node's SupportSurfaces and ObstacleClusters and, for every detection (the
+two messages with the same ``seq``; the node sends the surfaces first), prints each safe
+surface (id, height, free area, largest free disc) with "fits" or "does not fit" for an object
+of footprint radius ``--radius``, then the obstacles standing on it. (A planner in a hurry can
+act on the surfaces alone: their free space already keeps clear of the obstacles.)
 
     python examples/planner.py --endpoint tcp://127.0.0.1:5556 --radius 0.15
 
@@ -28,7 +30,7 @@ def fits(disc_radius: float, radius: float) -> str:
 
 
 def report(surfaces: SupportSurfaces, obstacles: ObstacleClusters | None, radius: float) -> str:
-    """The text printed for one SupportSurfaces message (and the newest obstacles)."""
+    """The text printed for one SupportSurfaces message and the obstacles of its detection."""
     safe = [s for s in surfaces.surfaces if s.safe]
     lines = [
         f"seq {surfaces.seq} stamp {surfaces.stamp:.3f} frame {surfaces.frame_id}: "
@@ -64,14 +66,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     # SIGTERM ends it like Ctrl-C: sockets closed by the with block, exit code 0.
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     topics = [args.surfaces_topic, args.obstacles_topic]
-    obstacles: ObstacleClusters | None = None
+    surfaces: SupportSurfaces | None = None  # the newest, until its obstacles come
+    obstacles: ObstacleClusters | None = None  # the newest
 
     def on_message(msg: Message) -> None:
-        nonlocal obstacles
+        nonlocal surfaces, obstacles
         if isinstance(msg, ObstacleClusters):
             obstacles = msg
         elif isinstance(msg, SupportSurfaces):
-            print(report(msg, obstacles, args.radius), flush=True)
+            surfaces = msg
+        # Whichever of a detection's two messages comes second completes it.
+        if surfaces is not None and obstacles is not None and surfaces.seq == obstacles.seq:
+            print(report(surfaces, obstacles, args.radius), flush=True)
+            surfaces = None
 
     try:
         with Subscriber(topics, args.endpoint) as sub:

@@ -3,6 +3,7 @@ messages skipped and counted; and the examples run as subprocesses, stopped by S
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import queue
 import signal
@@ -258,7 +259,9 @@ def run_example(name: str, *args: str) -> subprocess.Popen[str]:
     )
 
 
-def test_planner_prints_what_fits_and_exits_0_on_sigint():
+@pytest.mark.parametrize("surfaces_first", [True, False])
+def test_planner_prints_what_fits_and_exits_0_on_sigint(surfaces_first):
+    """The planner pairs a detection's surfaces and obstacles by seq, in either order."""
     with Publisher("tcp://127.0.0.1:*", "surfaces") as pub:
         obstacles = ObstacleClusters(stamp=5.0, frame_id="map", seq=7, clusters=[cluster(11, 3)])
         surfaces = SupportSurfaces(
@@ -269,8 +272,13 @@ def test_planner_prints_what_fits_and_exits_0_on_sigint():
         )
 
         def publish():
-            pub.publish(obstacles, topic="obstacles")  # one socket, two topics, like the node
-            pub.publish(surfaces)
+            # One socket, two topics, like the node; first the obstacles of an older detection.
+            pub.publish(dataclasses.replace(obstacles, seq=6, clusters=[]), topic="obstacles")
+            if surfaces_first:
+                pub.publish(surfaces)
+            pub.publish(obstacles, topic="obstacles")
+            if not surfaces_first:
+                pub.publish(surfaces)
 
         proc = run_example("planner.py", "--endpoint", pub.endpoint, "--radius", "0.15")
         try:
