@@ -2,11 +2,22 @@
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+import threading
+import time
+
 import numpy as np
 import pytest
 from conftest import box_points, plane_points
 
-from supportnode.client import pose_from_matrix
+from supportnode.client import (
+    ObstacleClusters,
+    Publisher,
+    Subscriber,
+    SupportSurfaces,
+    pose_from_matrix,
+)
 from supportnode.errors import InputError
 from supportnode.msgs import PointCloud
 from supportnode.node.node import Node, quaternion_matrix
@@ -27,6 +38,36 @@ def _sensor_pose(x, y, z):
     p = np.eye(4)
     p[:3, 3] = (x, y, z)
     return p
+
+
+@contextlib.contextmanager
+def _spinning(topics, incremental=True, **node_keys):
+    """A node spinning in a thread over sockets on 127.0.0.1 (``node.*`` keys overridden):
+    yields it, a publisher of scans and a subscriber of ``topics``; stops it on exit."""
+    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
+    p = DetectParams()
+    node_p = dataclasses.replace(
+        p.node,
+        scan_endpoint=pub.endpoint,
+        pub_endpoint="tcp://127.0.0.1:*",
+        map_period=0.0,
+        **node_keys,
+    )
+    try:
+        with Node(dataclasses.replace(p, node=node_p), incremental=incremental) as node:
+            node.open()
+            sub = Subscriber(topics, node.pub_endpoint, keep_newest=100)
+            th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+            th.start()
+            time.sleep(0.5)  # slow joiner
+            try:
+                yield node, pub, sub
+            finally:
+                node.stop()
+                th.join(5)
+                sub.close()
+    finally:
+        pub.close()
 
 
 def _summary(out):
@@ -277,11 +318,6 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
     """Scans at a rate detection cannot follow. Pipelined: every scan still enters the map and
     detection skips to the newest (counted); one thread: scans are dropped at the socket.
     Either way results keep coming, for the newest scans."""
-    import dataclasses
-    import threading
-    import time
-
-    from supportnode.client import Publisher, Subscriber, SupportSurfaces
     from supportnode.node import incremental
 
     full = incremental.full
@@ -291,24 +327,10 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
         return full(*a, **kw)
 
     monkeypatch.setattr(incremental, "full", slow_full)
-    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
-    p = DetectParams()
-    node_p = dataclasses.replace(
-        p.node,
-        scan_endpoint=pub.endpoint,
-        pub_endpoint="tcp://127.0.0.1:*",
-        pipeline=pipeline,
-        detect_process=False,  # the slow detection is patched into this process
-        map_period=0.0,
-    )
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
-    with Node(dataclasses.replace(p, node=node_p), incremental=False) as node:
-        node.open()
-        sub = Subscriber("surfaces", node.pub_endpoint, keep_newest=100)
-        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
-        th.start()
-        time.sleep(0.5)  # slow joiner
+    # detect_process off: the slow detection is patched into this process.
+    with _spinning("surfaces", False, pipeline=pipeline, detect_process=False) as (node, pub, sub):
         n = 12
         for i in range(n):
             pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
@@ -322,10 +344,6 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
                 if msg.stamp == pytest.approx(1.0 + 0.1 * (n - 1)):
                     break
         d = node.diagnostics()
-        node.stop()
-        th.join(5)
-        sub.close()
-    pub.close()
     c = d.counters
     assert got and got[-1].stamp == pytest.approx(1.0 + 0.1 * (n - 1)), "the newest scan"
     assert [round(s.height, 2) for s in got[-1].surfaces] == [0.5]
@@ -367,32 +385,12 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
     """node.surfaces_first: each detection's surfaces go out before its obstacles (same seq),
     so a planner gets the places to stand and their free space without waiting for the
     obstacles' hulls; off, the obstacles come first. Either way every detection sends both."""
-    import dataclasses
-    import threading
-    import time
-
-    from supportnode.client import ObstacleClusters, Publisher, Subscriber, SupportSurfaces
-
-    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
-    p = DetectParams()
-    node_p = dataclasses.replace(
-        p.node,
-        scan_endpoint=pub.endpoint,
-        pub_endpoint="tcp://127.0.0.1:*",
-        detect_process=False,
-        surfaces_first=surfaces_first,
-        map_period=0.0,
-    )
     pose = _sensor_pose(0, 0, 1.5)
     box = box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)
     pts = np.vstack([_platform(rng, 0, 0), box]) - pose[:3, 3]
     order = []
-    with Node(dataclasses.replace(p, node=node_p), incremental=False) as node:
-        node.open()
-        sub = Subscriber(["surfaces", "obstacles"], node.pub_endpoint, keep_newest=100)
-        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
-        th.start()
-        time.sleep(0.5)  # slow joiner
+    keys = {"detect_process": False, "surfaces_first": surfaces_first}
+    with _spinning(["surfaces", "obstacles"], False, **keys) as (node, pub, sub):
         for i in range(3):
             pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
             deadline = time.monotonic() + 10
@@ -401,10 +399,6 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
                 if isinstance(msg, SupportSurfaces | ObstacleClusters):
                     order.append((msg.seq, type(msg).__name__, msg))
         d = node.diagnostics()
-        node.stop()
-        th.join(5)
-        sub.close()
-    pub.close()
     first, second = ("SupportSurfaces", "ObstacleClusters")[:: 1 if surfaces_first else -1]
     assert [(s, k) for s, k, _ in order] == [(s, k) for s in (1, 2, 3) for k in (first, second)]
     surfaces = [m for _, k, m in order if k == "SupportSurfaces"]
@@ -418,17 +412,6 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
 def test_removed_object_leaves_the_results_over_sockets(rng):
     """`spin` with its detection worker: a box taken away leaves the published obstacles
     within a few scans, and the map counts what it cleared."""
-    import dataclasses
-    import threading
-    import time
-
-    from supportnode.client import ObstacleClusters, Publisher, Subscriber
-
-    pub = Publisher("tcp://127.0.0.1:*", "scan", hwm=100)
-    p = DetectParams()
-    node_p = dataclasses.replace(
-        p.node, scan_endpoint=pub.endpoint, pub_endpoint="tcp://127.0.0.1:*", map_period=0.0
-    )
     pose = _sensor_pose(-2.0, 0, 1.2)
     board = lambda: _platform(rng, 0, 0, n=8000)  # noqa: E731
     box = lambda: box_points(rng, (0.0, 0.0, 0.65), (0.3, 0.3, 0.3), 4000)  # noqa: E731
@@ -437,36 +420,25 @@ def test_removed_object_leaves_the_results_over_sockets(rng):
     ]
     at_box = lambda m: [c for c in m.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]  # noqa: E731
     seen = []
-    with Node(dataclasses.replace(p, node=node_p), incremental=False) as node:
-        node.open()
-        sub = Subscriber("obstacles", node.pub_endpoint, keep_newest=100)
-        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
-        th.start()
-        try:
-            deadline = time.monotonic() + 60
-            time.sleep(0.5)  # slow joiner
-            while node._worker is None or not node._worker.ready():
-                assert time.monotonic() < deadline, "worker did not start"
-                time.sleep(0.05)
-            for i in range(14):
-                parts = [board(), box(), wall()] if i < 3 else [board(), wall()]
-                stamp = 1.0 + 0.1 * i
-                pub.publish(_cloud(np.vstack(parts) - pose[:3, 3], stamp, seq=i + 1, pose=pose))
-                deadline = time.monotonic() + 20
-                while True:
-                    msg = sub.recv(0.2)
-                    if isinstance(msg, ObstacleClusters) and msg.stamp == pytest.approx(stamp):
-                        seen.append(len(at_box(msg)))
-                        break
-                    assert time.monotonic() < deadline, f"no obstacles for scan {i}"
-                if i >= 3 and seen[-1] == 0:
+    with _spinning("obstacles", False) as (node, pub, sub):
+        deadline = time.monotonic() + 60
+        while node._worker is None or not node._worker.ready():
+            assert time.monotonic() < deadline, "worker did not start"
+            time.sleep(0.05)
+        for i in range(14):
+            parts = [board(), box(), wall()] if i < 3 else [board(), wall()]
+            stamp = 1.0 + 0.1 * i
+            pub.publish(_cloud(np.vstack(parts) - pose[:3, 3], stamp, seq=i + 1, pose=pose))
+            deadline = time.monotonic() + 20
+            while True:
+                msg = sub.recv(0.2)
+                if isinstance(msg, ObstacleClusters) and msg.stamp == pytest.approx(stamp):
+                    seen.append(len(at_box(msg)))
                     break
-            d = node.diagnostics()
-        finally:
-            node.stop()
-            th.join(5)
-            sub.close()
-    pub.close()
+                assert time.monotonic() < deadline, f"no obstacles for scan {i}"
+            if i >= 3 and seen[-1] == 0:
+                break
+        d = node.diagnostics()
     assert seen[2] >= 1 and seen[-1] == 0, seen
     c = d.counters
     assert c["map_cleared"] > 0 and c["detections"] == len(seen), c
