@@ -147,6 +147,7 @@ class _Job:
     frame: str
     generation: int  # of the map it went into (a reset starts a new one)
     t_recv: float = 0.0  # perf_counter when it was received (threaded spin)
+    t_ready: float = 0.0  # perf_counter when it was merged and handed to detection
 
 
 def quaternion_matrix(q: np.ndarray) -> np.ndarray:
@@ -813,7 +814,7 @@ class Node(Closing):
         self.latency.add_all(timings)
         if not self._detection_due(job.stamp):
             return
-        job.t_recv = t_recv
+        job.t_recv, job.t_ready = t_recv, time.perf_counter()
         if self._last_recv is not None:
             dt = t_recv - self._last_recv
             self._scan_period = (
@@ -831,12 +832,14 @@ class Node(Closing):
     def _detect_loop(self) -> None:
         """Detection thread: detect on the newest ingested scan, publish, repeat.
 
-        A scan that arrived while the previous detection ran is already old; when scans come
-        regularly, the next one is due within a scan period, and detecting that one instead
-        gives results that are as frequent but fresher (latency = merge + detection, with no
-        wait for a busy detector in it). So the detector waits for it, up to one and a half
-        periods (at most ``_FRESH_WAIT_MAX_S``), and takes the old scan if none comes: the
-        last scan of a stream is always detected."""
+        A scan that was merged while the previous detection ran has waited for the detector
+        and is old; when scans come regularly, the next one is due within a scan period, and
+        detecting that one instead gives results that are as frequent but fresher (latency =
+        merge + detection, with no wait for a busy detector in it). So the detector waits for
+        it, up to one and a half periods after the old one arrived (at most
+        ``_FRESH_WAIT_MAX_S``), and takes the old scan if none comes: the last scan of a stream
+        is always detected. A scan merged after the detector became free has not waited (it
+        arrived during the detection, but its merge took longer): it is taken at once."""
         done_at = 0.0
         while True:
             with self._job_ready:
@@ -846,7 +849,7 @@ class Node(Closing):
                     return
                 job = self._job
                 period = self._scan_period
-                if job.t_recv < done_at and period is not None:
+                if job.t_ready < done_at and period is not None:
                     deadline = job.t_recv + min(1.5 * period, _FRESH_WAIT_MAX_S)
                     while self._job is job and not self._stop.is_set():
                         left = deadline - time.perf_counter()
