@@ -483,3 +483,38 @@ def test_removed_object_leaves_the_results_over_sockets(rng):
     c = d.counters
     assert c["map_cleared"] > 0 and c["detections"] == len(seen), c
     assert c["worker_detections"] + c["detections_reused"] == len(seen), c
+
+
+def test_worker_lost_after_sending_surfaces_publishes_them_once(rng):
+    """A worker that dies after it sent a detection's surfaces: the node redoes the detection
+    in its own thread, but publishes and tracks those surfaces once, and the obstacles that
+    follow carry their seq."""
+    from supportnode.node import incremental
+    from supportnode.node.worker import WorkerError
+
+    class DiesAfterSurfaces:
+        pid = 0
+
+        def ready(self) -> bool:
+            return True
+
+        def detect(self, points, stop, on_surfaces):
+            on_surfaces(incremental.full(points, DetectParams()))
+            raise WorkerError("detection worker died (exit code -9)")
+
+        def close(self) -> None:
+            pass
+
+    pose = _sensor_pose(0, 0, 1.5)
+    box = box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)
+    pts = np.vstack([_platform(rng, 0, 0), box]) - pose[:3, 3]
+    sent = []
+    with Node(incremental=False) as node:
+        node._worker = DiesAfterSurfaces()
+        job = node._ingest(_cloud(pts, 1.0, seq=1, pose=pose), {})
+        out = node._detect_job(job, {}, sent.append)
+        hits = [t["hits"] for t in node.surface_tracker.tracks.values()]
+    assert len(sent) == 1 and out.surfaces_sent and out.surfaces is sent[0]
+    assert [round(s.height, 2) for s in sent[0].surfaces] == [0.5] and hits == [1]
+    assert out.obstacles.seq == sent[0].seq and out.obstacles.clusters
+    assert node.counters["worker_failures"] == 1

@@ -467,6 +467,8 @@ class Node(Closing):
             if publish_surfaces is not None:
 
                 def on_surfaces(part: Items) -> None:
+                    if early:  # a worker that died after sending them: redone in this thread
+                        return
                     with self._track_lock:
                         if job.generation != self._generation:
                             return  # reset meanwhile: the final result is dropped too
