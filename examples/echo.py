@@ -44,7 +44,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     topics = args.topic or ["scan"]
 
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    # SIGINT and SIGTERM end it like Ctrl-C, also when it was started with SIGINT ignored
+    # (a background job of a script): Python then leaves SIGINT ignored.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.default_int_handler)
     try:
         with Subscriber(topics, args.endpoint, bind=args.bind, keep_newest=10) as sub:
 

@@ -63,8 +63,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, help="stop after this many seconds")
     args = parser.parse_args(argv)
 
-    # SIGTERM ends it like Ctrl-C: sockets closed by the with block, exit code 0.
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    # Sockets closed by the with block, exit code 0.
+    # SIGINT and SIGTERM end it like Ctrl-C, also when it was started with SIGINT ignored
+    # (a background job of a script): Python then leaves SIGINT ignored.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.default_int_handler)
     topics = [args.surfaces_topic, args.obstacles_topic]
     surfaces: SupportSurfaces | None = None  # the newest, until its obstacles come
     obstacles: ObstacleClusters | None = None  # the newest

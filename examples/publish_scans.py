@@ -50,7 +50,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     frames = load_frames(args.folder)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    # SIGINT and SIGTERM end it like Ctrl-C, also when it was started with SIGINT ignored
+    # (a background job of a script): Python then leaves SIGINT ignored.
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.default_int_handler)
     period = 1.0 / args.rate
     try:
         with Publisher(args.endpoint, args.topic, bind=not args.connect) as pub:

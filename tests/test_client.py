@@ -249,14 +249,36 @@ class Lines:
         raise AssertionError("expected line not printed; got:\n" + "\n".join(self.seen))
 
 
-def run_example(name: str, *args: str) -> subprocess.Popen[str]:
+def run_example(name: str, *args: str, sigint: object = signal.SIG_DFL) -> subprocess.Popen[str]:
+    """The example as a subprocess; sigint: the SIGINT disposition it starts with (pytest run
+    as a background job of a script has SIGINT ignored, and its children inherit that)."""
     return subprocess.Popen(
         [sys.executable, str(REPO / "examples" / name), *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         cwd=REPO,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, sigint),
     )
+
+
+@pytest.mark.parametrize("name", ["planner.py", "echo.py"])
+def test_example_started_with_sigint_ignored_still_stops_on_sigint(name):
+    """A background job of a shell script starts with SIGINT ignored: the examples must still
+    end on SIGINT (as `supportnode launch` and a user's kill -INT stop them), exit code 0."""
+    with bus.Publisher("tcp://127.0.0.1:*") as probe:
+        endpoint = probe.endpoint
+    proc = run_example(name, "--endpoint", endpoint, sigint=signal.SIG_IGN)
+    try:
+        time.sleep(3.0)  # imports done, subscribed: waiting for messages
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _, err = proc.communicate()
+        pytest.fail(f"{name} ignored SIGINT: {err}")
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
 
 
 @pytest.mark.parametrize("surfaces_first", [True, False])
@@ -290,7 +312,11 @@ def test_planner_prints_what_fits_and_exits_0_on_sigint(surfaces_first):
             no_fit = out.wait_for(lambda s: "surface 4:" in s, 5)
         finally:
             proc.send_signal(signal.SIGINT)
-            _, err = proc.communicate(timeout=10)
+            try:
+                _, err = proc.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()  # no process left behind
+                _, err = proc.communicate()
     assert proc.returncode == 0, err
     i = len(out.seen) - 1 - out.seen[::-1].index(obst)
     header, fits = out.seen[i - 2], out.seen[i - 1]
