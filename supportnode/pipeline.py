@@ -17,8 +17,9 @@ from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects import (
     ObjectResult,
     Segmentation,
+    cluster_objects,
     describe_objects,
-    segment_objects,
+    split_objects,
 )
 from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
 from supportnode.geometry.transform import transform_points
@@ -84,9 +85,10 @@ def detect(
     supported objects and compute free space. sensor_origin: (3,) sensor position in the input
     frame when known (planes above it are undersides, not surfaces). memo: per-item results
     kept between calls on a changing map (see `supportnode.geometry.memo`); the same result.
-    on_surfaces: called with the surfaces, their free space and the segmented objects as soon
-    as those are known, before the objects are described (hulls, boxes: a fifth of the time),
-    so that a node can publish the surfaces first; only when objects is true.
+    on_surfaces: called with the surfaces, their free space and the connected components of
+    the points on no surface (a Segmentation) as soon as those are known, before touching
+    objects are split and the objects described (hulls, boxes), so that a node can publish the
+    surfaces first; only when objects is true.
     """
     params = params or DetectParams()
     timings: dict[str, float] = {}
@@ -114,14 +116,18 @@ def detect(
         t = time.perf_counter()
         if memo is not None:
             memo.next_round()
-        segmentation = segment_objects(pts, surfaces, params.objects, memo)
+        # Free space needs only the connected components standing on each surface (a pile
+        # occupies its surface however it is split into objects): the surfaces are complete,
+        # and can go out, before touching objects are split and described.
+        components = cluster_objects(pts, surfaces, params.objects)
         timings["objects"] = time.perf_counter() - t
         t = time.perf_counter()
-        free = free_space_all(surfaces, segmentation, pts, params.freespace)
+        free = free_space_all(surfaces, components.segmentation, pts, params.freespace)
         timings["free_space"] = time.perf_counter() - t
         if on_surfaces is not None:
-            on_surfaces(surfaces, free, segmentation)
+            on_surfaces(surfaces, free, components.segmentation)
         t = time.perf_counter()
+        segmentation = split_objects(components, params.objects, memo)
         object_result = describe_objects(segmentation, memo)
         timings["objects"] += time.perf_counter() - t
     return Detection(surfaces, object_result, free, timings, rotation, gravity)

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
+from conftest import REPO
 from test_objects import box, make_surface, plane
 
 from supportnode.geometry.freespace import free_space, free_space_all
@@ -164,3 +166,38 @@ def test_detect_reports_surfaces_before_describing_objects(rng):
     assert s is d.surfaces and [x.to_dict() for x in f] == [x.to_dict() for x in d.free_space]
     assert len(seg.surface_ids) == len(d.objects.clusters) >= 1
     assert f[0].occupied_area > 0.09  # the box's footprint, before any hull was computed
+
+
+def test_free_space_does_not_depend_on_how_touching_objects_are_split():
+    """A pile occupies its surface however it is split into objects: free space comes from the
+    connected components standing on each surface. On the sloped scene the ramp (on the floor,
+    rising to 0.5 m) is split into four parts, and its high end stands on no surface; the floor
+    under it is still not free (it was, when free space came from the split objects)."""
+    from supportnode.io.clouds import read_cloud
+    from supportnode.params import DetectParams
+    from supportnode.pipeline import detect
+
+    pts = np.asarray(read_cloud(REPO / "sim_scans" / "sloped_sampled.ply").points, float)
+    results = {}
+    for split in (True, False):
+        params = DetectParams()
+        params = dataclasses.replace(
+            params, objects=dataclasses.replace(params.objects, split_touching=split)
+        )
+        results[split] = detect(pts, params)
+    split, whole = results[True], results[False]
+    assert split.objects.stats["merged_splits"] >= 1  # the ramp is cut into parts
+    assert len(split.objects.clusters) > len(whole.objects.clusters)
+    for a, b in zip(split.free_space, whole.free_space, strict=True):
+        assert a.to_dict() == b.to_dict()
+        np.testing.assert_array_equal(a.free_mask, b.free_mask)
+    (floor,) = [
+        f for f, s in zip(split.free_space, split.surfaces.surfaces, strict=True) if s.height < 0.01
+    ]
+    rows, cols = np.nonzero(floor.free_mask)
+    x = floor.grid_origin[0] + (cols + 0.5) * floor.cell_size
+    y = floor.grid_origin[1] + (rows + 0.5) * floor.cell_size
+    under_ramp = (
+        (x > 0.6) & (x < 2.4) & (np.abs(y) < 0.45)
+    )  # its footprint: x 0.53..2.45, |y| < 0.5
+    assert not under_ramp.any(), f"{under_ramp.sum()} free cells under the ramp"

@@ -534,3 +534,27 @@ def test_memo_gives_the_same_clusters_and_reuses_the_unchanged_ones(table_scene)
     assert none == 0 and again == both >= 3  # the barrels' split and both hulls
     assert plain.stats["merged_splits"] == 1
     assert not with_memo.clusters[0].footprint.flags.writeable
+
+
+def test_split_objects_finds_again_only_the_surfaces_of_split_clusters():
+    """split_objects takes the surface of each cluster that was not split from its component
+    (a function of the same points): the same surfaces as looking every cluster up anew."""
+    from conftest import REPO
+
+    from supportnode.geometry import objects as O
+    from supportnode.io.clouds import read_cloud
+    from supportnode.params import DetectParams
+
+    params = DetectParams()
+    for name in ("sloped", "shelf", "table_chairs"):
+        pts = np.asarray(read_cloud(REPO / "sim_scans" / f"{name}_sampled.ply").points, float)
+        surf = detect_surfaces(pts, params.surfaces)
+        comp = O.cluster_objects(pts, surf, params.objects)
+        seg = O.split_objects(comp, params.objects)
+        # Labels of the candidates, in the final numbering: _order again with no known surfaces.
+        cand = comp._candidates
+        fresh = O._order(
+            comp._points, seg.labels[cand].astype(np.int64), comp._lookups[1], params.objects
+        )
+        np.testing.assert_array_equal(seg.surface_ids, fresh.surface_ids)
+        assert (seg.surface_ids >= 0).sum() >= 3

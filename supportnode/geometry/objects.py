@@ -37,11 +37,14 @@ from supportnode.params import ObjectParams
 
 __all__ = [
     "Cluster",
+    "Components",
     "ObjectResult",
     "Segmentation",
+    "cluster_objects",
     "describe_objects",
     "detect_objects",
     "segment_objects",
+    "split_objects",
 ]
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
@@ -192,6 +195,26 @@ def detect_objects(
     return describe_objects(segment_objects(points, surfaces, params, memo), memo)
 
 
+@dataclass
+class Components:
+    """Connected components of the points on no surface, before touching objects are split:
+    what free space needs (a pile of objects occupies its surface however it is split), and
+    what :func:`split_objects` continues from.
+
+    segmentation: the components as a Segmentation (labels (N,), largest first, their
+    supporting surfaces and boxes). The other fields are for split_objects.
+    """
+
+    segmentation: Segmentation
+    _points: np.ndarray = field(repr=False)  # (M, 3) float64 candidate points
+    _candidates: np.ndarray = field(repr=False)  # (M,) int64 their rows in the input
+    _labels: np.ndarray = field(repr=False)  # (M,) int64 component of each candidate, -1: none
+    _supports: np.ndarray = field(repr=False)  # (C,) int64 surface of each component by label
+    _lookups: list = field(repr=False)
+    _n_points: int = 0
+    _stats: dict = field(default_factory=dict, repr=False)
+
+
 def segment_objects(
     points: np.ndarray,
     surfaces: SurfaceResult,
@@ -199,7 +222,20 @@ def segment_objects(
     memo: Memo | None = None,
 ) -> Segmentation:
     """The first half of :func:`detect_objects` (same arguments and errors): clusters, their
-    order, labels and supporting surfaces, without the hulls and boxes that describe them."""
+    order, labels and supporting surfaces, without the hulls and boxes that describe them.
+    The same as :func:`split_objects` of :func:`cluster_objects`."""
+    params = params or ObjectParams()
+    return split_objects(cluster_objects(points, surfaces, params), params, memo)
+
+
+def cluster_objects(
+    points: np.ndarray,
+    surfaces: SurfaceResult,
+    params: ObjectParams | None = None,
+) -> Components:
+    """Connected components of the points on no surface (arguments and errors as for
+    :func:`detect_objects`), each with the surface it stands on: touching objects not split
+    yet. Free space is computed from these (see `supportnode.geometry.freespace`)."""
     params = params or ObjectParams()
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -224,27 +260,62 @@ def segment_objects(
         raise InputError(f"unknown object method {params.method!r}; expected 'knn' or 'voxel'")
     lab = _drop_small(lab, params.min_points)
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
-    t1 = time.perf_counter()
+    seg = _order(cp, lab, lookups[1], params)
+    # Each component's surface by its label, for split_objects: a component that is not
+    # split keeps its points, so its surface (a function of them) is this one.
+    n = stats["components"]
+    of_label = np.full(n, -1, dtype=np.int64)
+    ok = lab >= 0
+    of_label[lab[ok]] = seg.labels[ok]
+    sids = seg.surface_ids[of_label] if n else np.zeros(0, np.int64)
+    seg.labels = _full_labels(len(pts), cand, seg.labels)
+    stats["time_cluster_s"] = time.perf_counter() - t0
+    seg.stats = {"components": n}
+    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats)
 
+
+def split_objects(
+    components: Components, params: ObjectParams | None = None, memo: Memo | None = None
+) -> Segmentation:
+    """The objects of :func:`cluster_objects`' components: touching objects split (when
+    ``params.split_touching``), ordered largest first, with their supporting surfaces (the
+    second half of :func:`segment_objects`). memo: as for :func:`detect_objects`."""
+    params = params or ObjectParams()
+    cp, lab = components._points, components._labels
+    stats = dict(components._stats)
+    t1 = time.perf_counter()
     stats["merged_splits"] = 0  # clusters cut into parts at a thin footprint neck
     stats["split_parts"] = 0
     stats["step_splits"] = 0  # of which cut at a step of the top height
     stats["concave_splits"] = 0  # of which cut along concave creases
+    known = components._supports
     if params.split_touching and len(lab):
-        lab = _split_touching(cp, lab, params, stats, memo)
+        split = _split_touching(cp, lab, params, stats, memo)
+        n = len(known)
+        # A label keeps its points unless its cluster was split (part 0 keeps the label):
+        # only those, and the new parts, need their surface found again.
+        before = np.bincount(lab[lab >= 0], minlength=n)
+        after = np.bincount(split[split >= 0], minlength=n)
+        known = np.concatenate([known, np.full(len(after) - n, -2, np.int64)])
+        known[:n][after[:n] != before] = -2
+        lab = split
     t2 = time.perf_counter()
 
-    seg = _order(cp, lab, lookups[1], params)
-    labels = np.full(len(pts), -1, dtype=np.int32)
-    labels[cand] = seg.labels
-    seg.labels = labels
+    seg = _order(cp, lab, components._lookups[1], params, known)
+    seg.labels = _full_labels(components._n_points, components._candidates, seg.labels)
     seg.stats = stats
     stats["clusters"] = len(seg.surface_ids)
-    stats["labelled_points"] = int((labels >= 0).sum())
-    stats["time_cluster_s"] = t1 - t0
+    stats["labelled_points"] = int((seg.labels >= 0).sum())
     stats["time_split_s"] = t2 - t1
     stats["time_order_s"] = time.perf_counter() - t2
     return seg
+
+
+def _full_labels(n: int, cand: np.ndarray, lab: np.ndarray) -> np.ndarray:
+    """(n,) int32 labels of all points from those (M,) of the candidates at rows cand."""
+    labels = np.full(n, -1, dtype=np.int32)
+    labels[cand] = lab
+    return labels
 
 
 def describe_objects(seg: Segmentation, memo: Memo | None = None) -> ObjectResult:
@@ -965,12 +1036,18 @@ def _split_footprint(
 
 
 def _order(
-    cp: np.ndarray, lab: np.ndarray, lookups: list[_SupportLookup], params: ObjectParams
+    cp: np.ndarray,
+    lab: np.ndarray,
+    lookups: list[_SupportLookup],
+    params: ObjectParams,
+    known: np.ndarray | None = None,
 ) -> Segmentation:
     """Clusters of lab (M,) over cp (M, 3) sorted largest first, their labels renumbered
     accordingly (``labels`` of the result is (M,) here) and their supporting surfaces.
 
     lookups: the (dilated) footprint lookups of the surfaces the clusters may stand on.
+    known: optional (K,) surface of each label found before for the same points (-1: none),
+    -2 where it must be found (labels beyond K too).
     """
     out = np.full(len(lab), -1, dtype=np.int64)
     if len(lab) == 0 or lab.max() < 0:
@@ -997,8 +1074,17 @@ def _order(
     out[ok] = new_id[lab[ok]]
     # Each cluster's run of in_clusters, in the new order.
     runs = np.stack([bounds[order] - bounds[0], bounds[order + 1] - bounds[0]], axis=1)
-    groups = [in_clusters[a:b] for a, b in runs.tolist()]  # one slice per cluster
-    sids = _supports(groups, lookups, params.support_tolerance)
+    if known is None:
+        groups = [in_clusters[a:b] for a, b in runs.tolist()]  # one slice per cluster
+        sids = _supports(groups, lookups, params.support_tolerance)
+    else:
+        sids = np.full(len(order), -2, dtype=np.int64)
+        have = order < len(known)
+        sids[have] = known[order[have]]
+        todo = np.flatnonzero(sids == -2)
+        # A cluster's surface depends on its points alone: only the new ones are looked up.
+        groups = [in_clusters[a:b] for a, b in runs[todo].tolist()]  # one slice per cluster
+        sids[todo] = _supports(groups, lookups, params.support_tolerance)
     return Segmentation(
         out,
         sids,
