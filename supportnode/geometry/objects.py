@@ -20,6 +20,7 @@ Each cluster is then attached to the surface directly under its lowest points, i
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -289,8 +290,14 @@ def split_objects(
     stats["step_splits"] = 0  # of which cut at a step of the top height
     stats["concave_splits"] = 0  # of which cut along concave creases
     known = components._supports
+    split = lab
     if params.split_touching and len(lab):
         split = _split_touching(cp, lab, params, stats, memo)
+    t2 = time.perf_counter()
+    if stats["merged_splits"] == 0:
+        # Nothing split (the usual case): the clusters are the components, in their order.
+        seg = dataclasses.replace(components.segmentation, stats=stats)
+    else:
         n = len(known)
         # A label keeps its points unless its cluster was split (part 0 keeps the label):
         # only those, and the new parts, need their surface found again.
@@ -298,12 +305,9 @@ def split_objects(
         after = np.bincount(split[split >= 0], minlength=n)
         known = np.concatenate([known, np.full(len(after) - n, -2, np.int64)])
         known[:n][after[:n] != before] = -2
-        lab = split
-    t2 = time.perf_counter()
-
-    seg = _order(cp, lab, components._lookups[1], params, known)
-    seg.labels = _full_labels(components._n_points, components._candidates, seg.labels)
-    seg.stats = stats
+        seg = _order(cp, split, components._lookups[1], params, known)
+        seg.labels = _full_labels(components._n_points, components._candidates, seg.labels)
+        seg.stats = stats
     stats["clusters"] = len(seg.surface_ids)
     stats["labelled_points"] = int((seg.labels >= 0).sum())
     stats["time_split_s"] = t2 - t1
