@@ -177,7 +177,14 @@ def test_run_end_to_end(sim_scans):
 def test_sigint_before_any_scan_exits_cleanly():
     proc = _start(_free_port(), _free_port())
     try:
-        time.sleep(1.5)  # imports done, spinning
+        # Spinning (its start is logged), not merely started: a SIGINT during the imports is
+        # Ctrl-C before the node runs (exit code 130), and imports take seconds on a loaded host.
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line or "scans from" in line:
+                break
+        assert "scans from" in line, "the node did not log its start"
         t = time.monotonic()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=5) == 0
