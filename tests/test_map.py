@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from conftest import plane_points
 
 from supportnode.errors import InputError
-from supportnode.geometry.voxels import voxelize
+from supportnode.geometry.voxels import OUTER_INDEX, voxelize
 from supportnode.node.map import KeyHash, VoxelMap, pack_keys, unpack_keys
 from supportnode.params import MapParams
 
@@ -82,6 +84,221 @@ def test_merge_is_exact_and_split_invariant(rng):
     got2 = _by_key(parts.voxels())
     assert np.array_equal(got2["keys"], want["keys"])
     np.testing.assert_allclose(got2["sums"], want["sums"], atol=1e-9)
+
+
+def _reference_voxels(keys: np.ndarray) -> dict:
+    """Integer keys (N, 3) of a scan's points -> {key: indices of its points, input order}."""
+    rows: dict = {}
+    for i, key in enumerate(map(tuple, keys.tolist())):
+        rows.setdefault(key, []).append(i)
+    return {key: np.array(idx) for key, idx in rows.items()}
+
+
+def _reference_picks(count: int, room: int) -> list[int]:
+    """Evenly spaced picks of min(count, room) of a voxel's count points, in input order."""
+    take = min(count, room)
+    return [j * count // take for j in range(take)]
+
+
+class _Reference:
+    """The map's voxels as dicts: count, moments (sums of the offsets from the corner, then of
+    their products in OUTER_INDEX order) and kept points (map frame) of each, with the
+    "stable" rule: free places are filled from each scan, and a voxel the map renewed (told,
+    not decided, here) starts over from the scan's points. The offsets are non-negative: no
+    cancellation, so any summation order gives the moments to ~1e-13."""
+
+    def __init__(self, size: float, keep: int) -> None:
+        self.size, self.keep = size, keep
+        self.count: dict = {}
+        self.moments: dict = {}
+        self.kept: dict = {}
+
+    def merge(self, pts: np.ndarray, renewed: set, removed: np.ndarray) -> None:
+        keys = np.floor(pts / self.size)
+        off = pts - keys * self.size
+        terms = np.c_[off, np.stack([off[:, a] * off[:, b] for a, b in OUTER_INDEX], axis=1)]
+        # Each point as the map keeps it: float32 offset from its corner, then map frame.
+        as_kept = keys * self.size + off.astype(np.float32).astype(np.float64)
+        for key, idx in _reference_voxels(keys.astype(np.int64)).items():
+            self.count[key] = self.count.get(key, 0) + len(idx)
+            self.moments[key] = self.moments.get(key, 0.0) + terms[idx].sum(axis=0)
+            kept = [] if key in renewed else self.kept.get(key, [])
+            room = self.keep - len(kept)
+            if room > 0:
+                kept = kept + as_kept[idx[_reference_picks(len(idx), room)]].tolist()
+            self.kept[key] = kept
+        for key in map(tuple, removed.tolist()):
+            del self.count[key], self.moments[key], self.kept[key]
+
+
+def _record_renewals(m: VoxelMap, scan: list) -> list:
+    """Wrap the map's see-through test: the keys it renews, scan by scan, each decision
+    checked against :func:`_reference_seen_through` on ``scan[0]``, the scan's points."""
+    log: list = []
+    test = m._seen_through
+
+    def recording(grid, vox, pairs, raw, off, origin, margin):
+        through = test(grid, vox, pairs, raw, off, origin, margin)
+        want = _reference_seen_through(m.size, scan[0], grid.keys[vox], raw, off, origin, margin)
+        assert np.array_equal(through, want)
+        log[-1] |= set(map(tuple, grid.keys[vox[through]].tolist()))
+        return through
+
+    m._seen_through = recording
+    return log
+
+
+_CLOSED_KITCHEN = """
+  - {kind: box, name: wall_front, size: [5.2, 0.1, 2.5], xyz: [0, -2.05, 1.25], role: structure}
+  - {kind: box, name: ceiling, size: [5.2, 4.2, 0.05], xyz: [0, 0, 2.525], role: structure}
+"""
+
+
+def _kitchen_scans(n: int, noise=None, seed: int = 3):
+    """n scans of the kitchen closed on all sides by a 48-beam lidar (34,560 points each)."""
+    from supportnode.sim import Lidar, parse_scene, poses_for
+    from supportnode.sim.scene import scene_path
+    from supportnode.sim.simulate import scans
+
+    scene = parse_scene(scene_path("kitchen").read_text(encoding="utf-8") + _CLOSED_KITCHEN)
+    lidar = Lidar(48, -22.5, 22.5, 720, 0.3, 30.0, 10.0)
+    return scans(scene, lidar, poses_for(scene, n), seed=seed, noise=noise)
+
+
+def _check_against_reference(m: VoxelMap, scans) -> list[int]:
+    """Integrate (points, pose) scans (map frame) into m and compare it, after each, with
+    :class:`_Reference`, and every renewal decision with :func:`_reference_seen_through`;
+    returns the number of voxels each scan hit."""
+    ref = _Reference(m.size, m.keep_points)
+    current: list = [None]  # the scan being merged, for the see-through reference
+    renewals = _record_renewals(m, current)
+    merged, sizes = 0, []
+    for i, (pts, pose) in enumerate(scans):
+        renewals.append(set())
+        good = pts[np.isfinite(pts).all(axis=1)]
+        current[0] = good
+        touched = m.integrate(pts, pose, 0.1 * i, in_map_frame=True)
+        merged += len(good)
+        sizes.append(len(touched.keys))
+        ref.merge(good, renewals[-1], touched.removed)
+
+        state = m.voxels()
+        keys = list(map(tuple, state["keys"].tolist()))
+        assert len(keys) == len(ref.count) and set(keys) == set(ref.count)
+        assert [ref.count[k] for k in keys] == state["count"].tolist()
+        # The moments of the voxels this scan hit (the others' did not change).
+        hit = m.voxels(touched.keys)
+        got = np.c_[hit["sums"], hit["outer"]]
+        want = np.array([ref.moments[k] for k in map(tuple, hit["keys"].tolist())])
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+        # Every voxel's kept points, in the order of the keys asked for.
+        want_pts = np.array([p for k in keys for p in ref.kept[k]]).reshape(-1, 3)
+        assert np.array_equal(m.points(state["keys"]), want_pts), i
+    st = m.stats()
+    assert st["voxels"] == len(ref.count) and st["points_merged"] == merged
+    assert st["renewed"] == sum(map(len, renewals))
+    return sizes
+
+
+@pytest.mark.slow
+def test_merge_matches_a_per_voxel_reference():
+    """Counts, moments and the kept points of every voxel, scan after scan, as a plain
+    per-voxel computation has them: moments within 1e-12 (the summation order may differ),
+    the kept points the very same raw points (evenly spaced picks in input order among each
+    voxel's points), given the renewals; on a noisy sequence (renewals), with a far stray
+    return (a box too large for a dense table: sorted keys), one 100 km away (a box of more
+    than 2^53 voxels: geometry.voxels.voxelize) and a driver's misses (NaN)."""
+    from supportnode.sim.noise import NoiseSpec
+
+    clouds = _kitchen_scans(5, NoiseSpec(gauss=0.01))
+    scans = [(c.points.astype(np.float64), c.sensor_pose) for c in clouds]
+    far = np.vstack([scans[2][0], [[400.0, -300.0, 1.0]]])
+    holes = scans[3][0].copy()
+    holes[::97] = np.nan
+    very_far = np.vstack([scans[4][0], [[1.0e5, -1.0e5, 5.0e3]]])
+    scans = [
+        *scans[:2],
+        (far, scans[2][1]),
+        (holes, scans[3][1]),
+        scans[3],
+        (very_far, scans[4][1]),
+    ]
+    m = VoxelMap(MapParams(radius=30.0, max_age=0.0))
+    _check_against_reference(m, scans)
+    st = m.stats()
+    assert st["renewed"] > 0 and st["cleared"] > 0 and st["points_invalid"] > 0
+
+
+@pytest.mark.slow
+def test_merge_of_more_voxels_than_16_bit_ranks_matches_the_reference():
+    """Scans of ~67k voxels each (ranks beyond 16 bits sort otherwise): the same as the
+    reference, the second scan filling the places the first left free."""
+    rng = np.random.default_rng(5)
+    pose = _pose(z=1.5)
+    scans = [(pose[:3, 3] + rng.uniform(-1.5, 1.5, (80_000, 3)), pose) for _ in range(2)]
+    assert min(_check_against_reference(_no_clear(), scans)) > 1 << 16
+
+
+def _reference_seen_through(size, scan, keys, raw, off, origin, margin) -> np.ndarray:
+    """VoxelMap._seen_through by its docstring, one candidate and one ray at a time, from
+    the scan's points themselves (scan (N, 3), map frame); keys (C, 3): the candidates."""
+    scan_keys = np.floor(scan / size)
+    local = scan - scan_keys * size
+    points = {k: local[idx] for k, idx in _reference_voxels(scan_keys.astype(np.int64)).items()}
+    out = []
+    for c, key in enumerate(keys):
+        o = origin - key * size
+        w = raw[c].astype(np.float64) - o  # (k, 3): the kept points from the sensor
+        w2 = w[:, 0] * w[:, 0] + w[:, 1] * w[:, 1] + w[:, 2] * w[:, 2]
+        radius2 = np.minimum(0.3 * size, off[c]) ** 2
+        before = max(0.5 * size, margin[c])
+        seen = False
+        for step in itertools.product((-1, 0, 1), repeat=3):
+            nb = points.get(tuple((key + step).tolist()))
+            if nb is None:
+                continue
+            for i in _reference_picks(len(nb), 32):  # rays to the neighbour's points
+                d = nb[i] + np.array(step) * size - o
+                length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+                u = d * (1.0 / max(length, 1e-12))
+                along = w[:, 0] * u[0] + w[:, 1] * u[1] + w[:, 2] * u[2]
+                hit = (along > 0) & (w2 - along * along < radius2) & (along < length - before)
+                seen |= bool(hit.any())
+        out.append(seen)
+    return np.array(out, bool)
+
+
+def test_seen_through_matches_a_per_ray_reference(rng):
+    """The renewal test on a real scan's voxels, with kept points scattered around the
+    scan's points (some on the rays, some off them), against a per-ray loop."""
+    (cloud,) = _kitchen_scans(1, seed=1)
+    m = _no_clear()
+    cols = [np.ascontiguousarray(cloud.points[:, a], dtype=np.float64) for a in range(3)]
+    grid = m._voxelize(cols)
+    vox = rng.choice(np.flatnonzero(grid.counts >= 4), 300, replace=False)
+    need = np.zeros(len(grid.counts), bool)
+    pairs = m._neighbour_pairs(grid, pack_keys(grid.keys), vox)
+    need[pairs[1]] = True
+    grid = m._by_voxel(grid, need)
+    k = m.keep_points
+    # Kept points: the scan's own points in the voxel, moved across the rays, and for half
+    # of the voxels towards the sensor (the rays to the scan's points then pass through them).
+    origin = cloud.sensor_pose[:3, 3]
+    raw = np.empty((len(vox), k, 3), np.float32)
+    for c, v in enumerate(vox):
+        at = grid.starts[v] + rng.integers(0, grid.counts[v], k)
+        p = np.stack([grid.local[a][at] for a in range(3)], axis=1)
+        to_sensor = origin - (grid.keys[v] * m.size + p)
+        lift = rng.uniform(0.03, 0.08) * (c % 2) / np.linalg.norm(to_sensor, axis=1)
+        raw[c] = p + lift[:, None] * to_sensor + rng.normal(0.0, 0.005, (k, 3))
+    off = rng.uniform(0.0, 0.03, (len(vox), k))
+    off[rng.uniform(size=off.shape) < 0.2] = 0.0  # places not filled
+    margin = rng.uniform(0.0, 0.05, len(vox))
+    got = m._seen_through(grid, vox, pairs, raw, off, origin, margin)
+    scan = np.stack(cols, axis=1)
+    want = _reference_seen_through(m.size, scan, grid.keys[vox], raw, off, origin, margin)
+    assert 0.1 < want.mean() < 0.9  # both outcomes are tested
+    assert np.array_equal(got, want)
 
 
 def test_precise_far_from_origin(rng):

@@ -1,9 +1,10 @@
 """Incremental voxel map: posed scans merged into per-voxel moments, aged, cropped, ray-cleared.
 
 State lives in the map frame (z up, metres). Every occupied voxel (edge ``voxel_size``) keeps the
-moments of the points merged into it relative to its own corner, exactly as
-:func:`supportnode.geometry.voxels.voxelize` computes them, so merging scan after scan is exact
-(merging two scans equals voxelizing their union) and stays precise far from the origin.
+moments of the points merged into it relative to its own corner, as
+:func:`supportnode.geometry.voxels.voxelize` computes them (up to the order of summation), so
+merging scan after scan is exact (merging two scans equals voxelizing their union, to rounding)
+and stays precise far from the origin.
 
 Cost per scan depends on the scan, not on the map size:
 
@@ -256,16 +257,22 @@ def _plane_noise(smallest: np.ndarray, count: np.ndarray, among: np.ndarray) -> 
 
 
 class _ScanGrid(NamedTuple):
-    """One scan's voxels, as :class:`~supportnode.geometry.voxels.VoxelGrid` has them: keys
-    (V, 3) int64 ascending, counts (V,), starts (V,) into the voxel-sorted points, moments
-    (V, 9): sums (V, 3) then outer (V, 6), and local (three (N,) voxel-sorted offsets from
-    the corner)."""
+    """One scan's voxels: keys (V, 3) int64 ascending, counts (V,), moments (V, 9): sums
+    (V, 3) then outer (V, 6) relative to each voxel's corner, and the points' offsets from
+    their voxel's corner, local (three (N,) columns), in one of two layouts:
+
+    - by voxel, as :class:`~supportnode.geometry.voxels.VoxelGrid` has them: ``voxel`` None,
+      voxel v's points are ``local[a][starts[v] : starts[v] + counts[v]]`` in input order;
+    - in input order, as merging leaves them: ``voxel`` (N,) intp is each point's voxel and
+      ``starts`` None; :meth:`VoxelMap._by_voxel` sorts the points of the voxels asked for.
+    """
 
     keys: np.ndarray
     counts: np.ndarray
-    starts: np.ndarray
+    starts: np.ndarray | None
     moments: np.ndarray
     local: list[np.ndarray]
+    voxel: np.ndarray | None = None
 
     @property
     def sums(self) -> np.ndarray:
@@ -635,17 +642,22 @@ class VoxelMap:
 
     def _voxelize(self, cols: list[np.ndarray]) -> _ScanGrid:
         """:func:`~supportnode.geometry.voxels.voxelize` of the scan's (N,) x, y, z columns,
-        map frame, with identical results (the same float operations in the same order), for
-        the usual case of a scan whose bounding box holds few voxels (a dense rank table);
-        other scans go to ``voxelize`` itself."""
+        map frame: the same voxels, counts and offsets, moments equal up to rounding, the
+        points left in input order (see :class:`_ScanGrid`). Scans whose bounding box holds
+        2^53 voxels or more (linear keys beyond float64's integers) go to ``voxelize``
+        itself."""
         size = self.size
         n = len(cols[0])
-        kcols = [np.floor(c / size) for c in cols]
+        # Float keys, then offsets from the corner (below), in buffers kept across scans.
+        kcols = []
+        for a, c in enumerate(cols):  # three axes
+            kc = np.divide(c, size, out=self._buffer(f"key{a}", n, np.float64))
+            kcols.append(np.floor(kc, out=kc))
         lo = np.array([c.min() for c in kcols])
         hi = np.array([c.max() for c in kcols])
         far = max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40
         dims = (hi - lo + 1.0) if not far else np.full(3, np.inf)
-        if float(np.prod(dims)) > max(8 * n, 1 << 20):
+        if float(np.prod(dims)) >= 2.0**53:  # linear keys not exact in float64
             grid = voxelize(np.stack(cols, axis=1), np.full(3, size))  # raises when too far
             moments = np.concatenate([grid.sums, grid.outer], axis=1)
             return _ScanGrid(grid.keys, grid.counts, grid.starts, moments, grid.local)
@@ -661,44 +673,85 @@ class VoxelMap:
         lin_f -= lo[2]
         lin = self._buffer("lin", n, np.int64)
         lin[...] = lin_f
-        # Occupied linear keys in ascending order from a mark table (reset after use, so it
-        # stays all False), then each point's voxel rank by a table lookup.
         dims = dims.astype(np.int64)
         top = int(np.prod(dims)) - 1
-        mark = self._buffer("mark", top + 1, np.bool_)
-        mark[lin] = True
-        lin_of_voxel = np.flatnonzero(mark)
-        mark[lin_of_voxel] = False
-        nvox = len(lin_of_voxel)
-        if nvox <= 1 << 16:
-            # 16-bit ranks: numpy's stable sort of uint16 is one radix pass.
-            rank = self._buffer("rank16", top + 1, np.uint16)
-            rank[lin_of_voxel] = np.arange(nvox, dtype=np.uint16)
-            point_voxel = rank[lin]
-            order = np.argsort(point_voxel, kind="stable")
+        # Each point's voxel as its rank among the occupied keys, ascending (intp: what
+        # bincount takes; other index types it converts on every call).
+        point_voxel = self._buffer("point_voxel", n, np.intp)
+        if top < max(8 * n, 1 << 20):
+            # Few keys in the box (the usual case): the occupied ones from a mark table
+            # (reset after use, so it stays all False), the ranks by a table lookup.
+            mark = self._buffer("mark", top + 1, np.bool_)
+            mark[lin] = True
+            lin_of_voxel = np.flatnonzero(mark)
+            mark[lin_of_voxel] = False
+            rank = self._buffer("rank", top + 1, np.intp)
+            rank[lin_of_voxel] = np.arange(len(lin_of_voxel))
+            np.take(rank, lin, out=point_voxel)
         else:
-            rank = self._buffer("rank", top + 1, np.int64)
-            rank[lin_of_voxel] = np.arange(nvox)
-            point_voxel = rank[lin]
-            order = argsort_keys(point_voxel, top=nvox - 1)
+            # A box too large for a table (a large room, a far return): the occupied keys by
+            # sorting the points' keys (any order among equal keys would do; radix is the
+            # fastest), each point's rank from its place in that order. These scans went to
+            # voxelize, whose gathers and 9 reduceat over ~1e5 voxels cost 3x the sort.
+            order = argsort_keys(lin, top=top)
+            lin_sorted = np.take(lin, order)
+            new = np.empty(n, bool)
+            new[0] = True
+            np.not_equal(lin_sorted[1:], lin_sorted[:-1], out=new[1:])
+            lin_of_voxel = lin_sorted[new]
+            point_voxel[order] = np.cumsum(new) - 1
+        nvox = len(lin_of_voxel)
         counts = np.bincount(point_voxel, minlength=nvox)
-        starts = np.cumsum(counts) - counts
         rem, kz = np.divmod(lin_of_voxel, dims[2])
         kx, ky = np.divmod(rem, dims[1])
         keys = np.stack([kx, ky, kz], axis=1) + lo.astype(np.int64)
-        # Offsets from the voxel corner, as voxelize computes them, sorted by voxel.
+        # Offsets from the voxel corner, as voxelize computes them, left in input order, and
+        # the moments summed by bincount in input order: no sort of the scan's points and no
+        # gather of them (a stable sort, three gathers and nine reduceat cost 2-3x the nine
+        # bincounts). The sums are those of voxelize up to rounding (each voxel's points are
+        # added one after the other, starting from zero, where reduceat adds the first to a
+        # pairwise sum of the others): deterministic, as exact as before, not the same bits.
+        # Only the kept points need points by voxel, and only of a few voxels (_by_voxel).
         local = []
+        moments = np.empty((nvox, 9))
         for a in range(3):  # three axes
             off = np.multiply(kcols[a], size, out=kcols[a])
             np.subtract(cols[a], off, out=off)
-            local.append(np.take(off, order, out=self._buffer(f"local{a}", n, np.float64)))
-        moments = np.empty((nvox, 9))
-        for a in range(3):  # three axes
-            moments[:, a] = np.add.reduceat(local[a], starts)
+            local.append(off)
+            moments[:, a] = np.bincount(point_voxel, weights=off, minlength=nvox)
         prod = self._buffer("prod", n, np.float64)
         for col, (a, b) in enumerate(OUTER_INDEX):  # six entries
-            moments[:, 3 + col] = np.add.reduceat(np.multiply(local[a], local[b], out=prod), starts)
-        return _ScanGrid(keys, counts, starts, moments, local)
+            np.multiply(local[a], local[b], out=prod)
+            moments[:, 3 + col] = np.bincount(point_voxel, weights=prod, minlength=nvox)
+        return _ScanGrid(keys, counts, None, moments, local, point_voxel)
+
+    def _by_voxel(self, grid: _ScanGrid, need: np.ndarray | None = None) -> _ScanGrid:
+        """``grid`` with the points of the voxels ``need`` (V,) bool (None: all) by voxel, in
+        input order within each (see :class:`_ScanGrid`); the other voxels' ``starts`` are
+        meaningless and their points absent. A stable sort of the points asked for puts each
+        voxel's points in the order a stable sort of all of them would: the same evenly spaced
+        picks. In steady state few voxels take points or are tested for renewal (new voxels,
+        ones not yet full, and the neighbourhoods of renewal candidates: of an os128 scan's
+        131k points in a room, some thousands, ~30k with 1 cm of noise), so this sorts and
+        gathers only those."""
+        if grid.voxel is None:  # sorted already (voxelize's grid)
+            return grid
+        nvox = len(grid.counts)
+        if need is None:
+            idx, voxel, counts = None, grid.voxel, grid.counts
+        else:
+            idx = np.flatnonzero(np.take(need, grid.voxel))
+            voxel, counts = np.take(grid.voxel, idx), np.where(need, grid.counts, 0)
+        if nvox <= 1 << 16:
+            # 16-bit ranks: numpy's stable sort of uint16 is one radix pass.
+            order = np.argsort(voxel.astype(np.uint16), kind="stable")
+        else:
+            order = argsort_keys(voxel, top=nvox - 1)
+        if idx is not None:
+            order = np.take(idx, order)
+        starts = np.cumsum(counts) - counts
+        local = [np.take(c, order) for c in grid.local]
+        return grid._replace(starts=starts, local=local, voxel=None)
 
     def _merge(
         self, cols: list[np.ndarray], stamp: float, origin: np.ndarray
@@ -737,7 +790,7 @@ class VoxelMap:
         else:  # "recent" takes new points, "centroid" new sums, on every scan
             self.version += 1
             if self.keep_points:
-                self._keep_recent(grid, slots)
+                self._keep_recent(self._by_voxel(grid), slots)
         return slots, grid.keys
 
     def _keep_first(
@@ -759,6 +812,9 @@ class VoxelMap:
         k = self.keep_points
         n = self._raw_n[slots]
         cnt = grid.counts
+        # The voxels whose points are needed by voxel (_by_voxel): those with free places
+        # (renewed ones are among the candidates, added below).
+        need = n < k
         had = np.flatnonzero((n > 0) & (cnt >= 4))
         if len(had):
             moments = np.take(grid.moments, had, axis=0)
@@ -788,12 +844,18 @@ class VoxelMap:
             for j in range(1, k):  # keep_points columns
                 np.maximum(most, dist[:, j], out=most)
             off = np.flatnonzero(planar & (most > tol))
+            # The candidates' rays come from the scan's points in them and their neighbours.
+            pairs = self._neighbour_pairs(grid, packed, had[off])
+            need[pairs[1]] = True
+            grid = self._by_voxel(grid, need)
             seen_through = self._seen_through(
-                grid, packed, had[off], raw[off], dist[off], origin, 3.0 * noise[off]
+                grid, had[off], pairs, raw[off], dist[off], origin, 3.0 * noise[off]
             )
             renew = s[off[seen_through]]
             self._raw_n[renew] = 0
             self._stats["renewed"] += len(renew)
+        else:
+            grid = self._by_voxel(grid, need)
         room = k - self._raw_n[slots]
         sel = np.flatnonzero(room > 0)
         if len(sel) == 0:
@@ -813,11 +875,27 @@ class VoxelMap:
         self._pts.reshape(-1, 3)[dest] = (self._keys[s] * self.size)[rep] + vals
         self._raw_n[s] += take.astype(np.int32)
 
+    @staticmethod
+    def _neighbour_pairs(
+        grid: _ScanGrid, packed: np.ndarray, vox: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs of a candidate, one of the scan's voxels ``vox`` (C,), and one of the
+        scan's voxels among its 27 neighbours (itself included), as two (P,) arrays: candidate
+        * 27 + step (into ``_STEPS``), ascending, and the neighbour's index into the scan's
+        voxels. packed: (V,) ascending packed keys of the scan's voxels."""
+        if len(vox) == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        nb_keys = grid.keys[vox][:, None, :] + _STEPS[None, :, :]  # (C, 27, 3)
+        nb_packed = pack_keys(nb_keys.reshape(-1, 3))
+        at = np.minimum(np.searchsorted(packed, nb_packed), len(packed) - 1)
+        pair = np.flatnonzero(packed[at] == nb_packed)  # (candidate, neighbour) pairs found
+        return pair, at[pair]
+
     def _seen_through(
         self,
         grid: _ScanGrid,
-        packed: np.ndarray,
         vox: np.ndarray,
+        pairs: tuple[np.ndarray, np.ndarray],
         raw: np.ndarray,
         off: np.ndarray,
         origin: np.ndarray,
@@ -826,8 +904,9 @@ class VoxelMap:
         """(C,) bool: did a ray of this scan pass through one of the kept points raw (C, k, 3)
         (relative to the corner) of the scan's voxels ``vox`` (C,), which lie off the plane of
         the scan's points in the voxel by off (C, k) metres (0: a place not filled)?
-        packed: (V,) ascending packed keys of the scan's voxels. margin: (C,) metres, at least
-        this much before (the noise of the scan's points along the ray).
+        pairs: :meth:`_neighbour_pairs` of vox (grid must have their neighbours' points by
+        voxel). margin: (C,) metres, at least this much before (the noise of the scan's points
+        along the ray).
 
         A ray to one of the scan's points p in the voxel or its 26 neighbours passes within
         ``_SEE_RADIUS`` voxels of a kept point q, and no further than q lies off the plane (a
@@ -841,37 +920,52 @@ class VoxelMap:
         if len(vox) == 0:
             return np.zeros(0, bool)
         size = self.size
-        step = _STEPS
-        nb_keys = grid.keys[vox][:, None, :] + step[None, :, :]  # (C, 27, 3)
-        nb_packed = pack_keys(nb_keys.reshape(-1, 3))
-        at = np.minimum(np.searchsorted(packed, nb_packed), len(packed) - 1)
-        pair = np.flatnonzero(packed[at] == nb_packed)  # (candidate, neighbour) pairs found
-        pc, pv = pair // len(step), at[pair]
+        pair, pv = pairs
+        pc = pair // len(_STEPS)
         counts = grid.counts[pv]
         take = np.minimum(counts, _SEE_RAYS)
-        rep = np.repeat(np.arange(len(pair)), take)
-        j = np.arange(len(rep)) - np.repeat(np.cumsum(take) - take, take)
-        pick = grid.starts[pv][rep] + (j * counts[rep]) // take[rep]
+        # The rays (P,) of a pair are consecutive, and the pairs go by candidate: what is
+        # per pair or per candidate is repeated to the rays (np.repeat), not gathered, and
+        # the test runs one kept point at a time on (P,) columns: (P, k) gathers by candidate
+        # made it ~3x slower (15 ms a scan with 1 cm of noise). The arithmetic is that of the
+        # (P, k) form, value for value, so are the decisions. rays: per candidate.
+        rays = np.bincount(pc, weights=take, minlength=len(vox)).astype(np.int64)  # (C,)
+        j = np.arange(int(take.sum())) - np.repeat(np.cumsum(take) - take, take)
+        pick = np.repeat(grid.starts[pv], take)
+        pick += (j * np.repeat(counts, take)) // np.repeat(take, take)
         # Everything relative to the candidate's corner: the sensor, and the scan's points
         # (relative to their own voxel's corner) shifted by the step between the voxels.
         o = origin - grid.keys[vox] * size  # (C, 3)
-        shift = (step[pair % len(step)] * size)[rep]  # (P, 3)
-        cand = pc[rep]
+        shift = _STEPS[pair % len(_STEPS)] * size  # (pairs, 3)
         # The kept points from the sensor, once per candidate: w (C, k) per axis, |w|^2.
         w = [raw[:, :, a].astype(np.float64) - o[:, a, None] for a in range(3)]
         w2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
         # Each ray (P,): its direction u and the length of the ray to its point.
-        d = [grid.local[a][pick] + shift[:, a] - o[cand, a] for a in range(3)]
+        d = []
+        for a in range(3):  # three axes
+            da = np.take(grid.local[a], pick)
+            da += np.repeat(shift[:, a], take)
+            da -= np.repeat(o[:, a], rays)
+            d.append(da)
         length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         inv = 1.0 / np.maximum(length, 1e-12)
-        along = w[0][cand] * (d[0] * inv)[:, None]  # (P, k): q's distance along the ray
-        along += w[1][cand] * (d[1] * inv)[:, None]
-        along += w[2][cand] * (d[2] * inv)[:, None]
+        u = [da * inv for da in d]
+        before = length - np.repeat(np.maximum(_SEE_BEFORE * size, margin), rays)
         reach = _SEE_RADIUS * size
-        radius2 = (np.minimum(reach, _SEE_OFF * off) ** 2)[cand]
-        through = (along > 0.0) & (w2[cand] - along * along < radius2)
-        through &= along < (length - np.maximum(_SEE_BEFORE * size, margin[cand]))[:, None]
-        return np.bincount(cand[through.any(axis=1)], minlength=len(vox)) > 0
+        radius2 = np.minimum(reach, _SEE_OFF * off) ** 2  # (C, k)
+        through = np.zeros(len(j), bool)  # (P,): through one of the kept points so far
+        along, tmp, hit = np.empty(len(j)), np.empty(len(j)), np.empty(len(j), bool)
+        for q in range(raw.shape[1]):  # keep_points: kept point q of each candidate
+            # q's distance along the ray, and whether the ray passes within radius of it.
+            np.multiply(np.repeat(w[0][:, q], rays), u[0], out=along)
+            along += np.multiply(np.repeat(w[1][:, q], rays), u[1], out=tmp)
+            along += np.multiply(np.repeat(w[2][:, q], rays), u[2], out=tmp)
+            np.subtract(np.repeat(w2[:, q], rays), np.multiply(along, along, out=tmp), out=tmp)
+            np.less(tmp, np.repeat(radius2[:, q], rays), out=hit)
+            hit &= along > 0.0
+            hit &= along < before
+            through |= hit
+        return np.bincount(np.repeat(np.arange(len(vox)), rays)[through], minlength=len(vox)) > 0
 
     def _keep_recent(self, grid: _ScanGrid, slots: np.ndarray) -> None:
         """Ring buffer of the newest ``keep_points`` raw points per voxel (relative to corner).
