@@ -308,6 +308,12 @@ class NodeParams:
         "are known and its obstacles once they are described, with the same seq (false: both "
         "together, obstacles first, so a planner that reacts to surfaces has their obstacles)",
     )
+    defer_clear: bool = param(
+        True,
+        "pipeline: clear each scan's free space (and forget stale voxels) after its detection "
+        "took the map's points, while the detection runs, rather than before it; detection "
+        "then sees a removed object one scan longer (false: clear before detecting)",
+    )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
         64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024

@@ -20,6 +20,7 @@ from supportnode.client import (
 )
 from supportnode.errors import InputError
 from supportnode.msgs import PointCloud
+from supportnode.node import incremental
 from supportnode.node.node import Node, quaternion_matrix
 from supportnode.params import DetectParams
 
@@ -449,9 +450,12 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
     assert 0 < d.latencies["receive_to_surfaces"].p50 <= d.latencies["receive_to_publish"].p99
 
 
-def test_removed_object_leaves_the_results_over_sockets(rng):
+@pytest.mark.parametrize("defer_clear", [True, False])
+def test_removed_object_leaves_the_results_over_sockets(rng, defer_clear):
     """`spin` with its detection worker: a box taken away leaves the published obstacles
-    within a few scans, and the map counts what it cleared."""
+    within a few scans, and the map counts what it cleared; also with the clearing deferred
+    to the detection thread (node.defer_clear, the default), where each scan's detection
+    sees the clearing of the scans before it only."""
     pose = _sensor_pose(-2.0, 0, 1.2)
     board = lambda: _platform(rng, 0, 0, n=8000)  # noqa: E731
     box = lambda: box_points(rng, (0.0, 0.0, 0.65), (0.3, 0.3, 0.3), 4000)  # noqa: E731
@@ -460,7 +464,7 @@ def test_removed_object_leaves_the_results_over_sockets(rng):
     ]
     at_box = lambda m: [c for c in m.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]  # noqa: E731
     seen = []
-    with _spinning("obstacles", False) as (node, pub, sub):
+    with _spinning("obstacles", False, defer_clear=defer_clear) as (node, pub, sub):
         deadline = time.monotonic() + 60
         while node._worker is None or not node._worker.ready():
             assert time.monotonic() < deadline, "worker did not start"
@@ -483,6 +487,7 @@ def test_removed_object_leaves_the_results_over_sockets(rng):
     c = d.counters
     assert c["map_cleared"] > 0 and c["detections"] == len(seen), c
     assert c["worker_detections"] + c["detections_reused"] == len(seen), c
+    assert ("clear" in d.latencies) == defer_clear  # deferred clearings, timed when they ran
 
 
 def test_worker_lost_after_sending_surfaces_publishes_them_once(rng):
@@ -498,7 +503,7 @@ def test_worker_lost_after_sending_surfaces_publishes_them_once(rng):
         def ready(self) -> bool:
             return True
 
-        def detect(self, points, stop, on_surfaces):
+        def detect(self, points, stop, on_surfaces, on_sent=None):
             on_surfaces(incremental.full(points, DetectParams()))
             raise WorkerError("detection worker died (exit code -9)")
 
@@ -518,3 +523,191 @@ def test_worker_lost_after_sending_surfaces_publishes_them_once(rng):
     assert [round(s.height, 2) for s in sent[0].surfaces] == [0.5] and hits == [1]
     assert out.obstacles.seq == sent[0].seq and out.obstacles.clusters
     assert node.counters["worker_failures"] == 1
+
+
+def _removed_box_clouds(rng, pose, n=10, wall_only=False):
+    """Scans of a box on a board before a wall (the box gone from the fourth scan on), in the
+    sensor frame of ``pose`` (as in test_removed_object_leaves_the_map). wall_only: a floor
+    patch 4 m to the side in the first scans, and once the box is gone only a band of the wall
+    whose rays from (-2, 0, 1.2) pass through where the box stood and above the board (the
+    scans' box then holds neither)."""
+    clouds = []
+    for i in range(n):
+        z = (0.0, 1.5)
+        parts = [_platform(rng, 0, 0, n=8000)]
+        if i < 3:
+            parts.append(box_points(rng, (0.0, 0.0, 0.65), (0.3, 0.3, 0.3), 4000))
+            if wall_only:
+                parts.append(plane_points(rng, -2, 2, 4, 6, 0.0, 20000))
+        elif wall_only:
+            parts, z = [], (0.15, 0.4)
+        parts.append(np.c_[np.full(6000, 2.0), rng.uniform(-1, 1, 6000), rng.uniform(*z, 6000)])
+        clouds.append(_cloud(np.vstack(parts) - pose[:3, 3], 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+    return clouds
+
+
+class _InProcessWorker:
+    """A detection worker that detects in this thread, recording whether the map's clearing
+    was pending when the points were sent, after on_sent and when the detection ended;
+    ``between``: called between sending and on_sent."""
+
+    pid = 0
+
+    def __init__(self, node, between=None):
+        self.node, self.between, self.log = node, between, []
+
+    def ready(self):
+        return True
+
+    def detect(self, points, stop, on_surfaces, on_sent=None):
+        sent = np.array(points, copy=True)
+        pending = self.node.map.clear_pending
+        if self.between is not None:
+            self.between()
+        if on_sent is not None:
+            on_sent()
+        after_sent = self.node.map.clear_pending
+        items = incremental.full(sent, DetectParams(), on_surfaces=on_surfaces)
+        self.log.append((pending, after_sent, self.node.map.clear_pending))
+        return items
+
+    def rss_mb(self):
+        return float("nan")
+
+    def close(self):
+        pass
+
+
+def _map_state(m):
+    return m.points(), m.stats(), m.version, m.clear_pending
+
+
+def _same_map(a, b):
+    pa, sa, va, ca = _map_state(a)
+    pb, sb, vb, cb = _map_state(b)
+    assert np.array_equal(pa, pb) and sa == sb and va == vb and ca == cb
+
+
+@pytest.mark.parametrize("surfaces_first", [False, True])
+def test_deferred_clearing_runs_beside_the_worker(rng, surfaces_first):
+    """The pipelined node's detection with node.defer_clear: the scan is merged, detection
+    takes the map's points, and the scan's clearing runs once the worker has them (with or
+    without surfaces first). The map goes through the same states as the serial node's (which
+    clears before detecting), and the box leaves the results one scan later."""
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    clouds = _removed_box_clouds(rng, pose, 12)
+
+    def at_box(out):
+        return [c for c in out.obstacles.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]
+
+    serial, deferred = [], []
+    with Node(incremental=False) as ref, Node(incremental=False) as node:
+        node._worker = worker = _InProcessWorker(node)
+        for cloud in clouds:
+            serial.append(len(at_box(ref.process(cloud))))
+            job = node._ingest(cloud, {}, defer=True)
+            assert node.map.clear_pending
+            out = node._detect_job(job, {}, [].append if surfaces_first else None)
+            if out.reused:  # no points sent: the clearing waits for the next merge
+                assert node.map.clear_pending
+                with node._lock:
+                    node._finish_map()
+            deferred.append(len(at_box(out)))
+            _same_map(node.map, ref.map)
+        d = node.diagnostics()
+    # Pending when the points went out, done before the worker's detection returned.
+    assert worker.log and set(worker.log) == {(True, False, False)}, worker.log
+    # Scan k's detection sees the map the serial node's detection of scan k - 1 saw, but for
+    # scan k's merge (of a board and a wall seen before): the same obstacles at the box.
+    assert serial[2] >= 1 and serial[-2] == 0, serial
+    assert deferred[3:] == serial[2:-1], (serial, deferred)
+    assert d.counters["map_cleared"] > 0 and d.latencies["clear"].p50 > 0
+
+
+def test_deferred_clearing_region_is_detected_again(rng):
+    """What a deferred clearing removed joins the region the next detection recomputes, and
+    changes the map's version: a node detecting regionally (or reusing its last detection on
+    an unchanged map) publishes what a full recompute does, and the box leaves the results,
+    also where the scans that follow do not reach (only a band of the wall behind it)."""
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    clouds = _removed_box_clouds(rng, pose, 10, wall_only=True)
+    outs = {}
+    for inc in (True, False):
+        with Node(incremental=inc) as node:
+            node._worker = _InProcessWorker(node)
+            outs[inc] = []
+            for cloud in clouds:
+                job = node._ingest(cloud, {}, defer=True)
+                outs[inc].append(node._detect_job(job, {}))
+                with node._lock:  # what the detection loop does after publishing
+                    node._finish_map()
+            assert node.map.stats()["cleared"] > 0
+    assert any(o.incremental for o in outs[True])
+    for a, b in zip(outs[True], outs[False], strict=True):
+        assert _summary(a) == _summary(b)
+
+    def at_box(out):
+        return [c for c in out.obstacles.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]
+
+    def box_points_seen(out):
+        return sum(c.point_count for c in at_box(out))
+
+    # Where rays from the sensor cross (its top and the side facing the sensor) it goes.
+    assert box_points_seen(outs[True][-1]) < 0.7 * box_points_seen(outs[True][2])
+
+
+def test_clearing_pending_at_a_reset_is_dropped(rng):
+    """A source that restarted (a stamp back in time) resets the map: the old map's pending
+    clearing goes with it, never onto the new map (its forgetting, at the old stamp 20 s,
+    would drop everything the new scans at 1 s put in), and a detection of the old map that
+    sends its points after the reset does not run the new map's clearing."""
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    a, b, c = _removed_box_clouds(rng, pose, 3)
+    a = dataclasses.replace(a, stamp=20.0)
+    b = dataclasses.replace(b, stamp=1.0)
+    c = dataclasses.replace(c, stamp=0.5)
+    with Node(incremental=False) as node, Node() as fresh_b, Node() as fresh_c:
+        node._ingest(a, {}, defer=True)
+        old = node.map
+        job = node._ingest(b, {}, defer=True)  # before a: a reset
+        assert node.counters["time_jumps"] == 1 and node.map is not old
+        assert old.clear_pending  # dropped with the old map
+        fresh_b._ingest(b, {}, defer=True)
+        _same_map(node.map, fresh_b.map)
+
+        # The detection of b sends its points after c (another restart) reset the map again.
+        maps = [node.map]
+        node._worker = worker = _InProcessWorker(node, lambda: node._ingest(c, {}, defer=True))
+        assert node._detect_job(job, {}) is None  # stale: the map was reset meanwhile
+        assert worker.log == [(True, True, True)] and node.counters["time_jumps"] == 2
+        assert maps[0].clear_pending and node.map is not maps[0]
+        fresh_c._ingest(c, {}, defer=True)
+        _same_map(node.map, fresh_c.map)
+        for n in (node, fresh_c):
+            with n._lock:
+                n._finish_map()
+        _same_map(node.map, fresh_c.map)
+        assert len(node.map) > 0 and not node.map.clear_pending
+
+
+def test_scans_no_detection_takes_are_cleared_at_once(rng):
+    """Pipelined, node.defer_clear: a scan that comes while the detector is busy, or that no
+    detection is due for (node.detection_rate), has its clearing run as soon as it is merged,
+    not before the next scan's merge; one handed to an idle detector leaves it to the
+    detection (after it took the map's points)."""
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    clouds = [[bytes(f) for f in c.encode("scan")] for c in _removed_box_clouds(rng, pose, 4)]
+    p = DetectParams()
+    slow = dataclasses.replace(p, node=dataclasses.replace(p.node, detection_rate=5.0))
+    with Node() as node, Node(slow) as limited:
+        node._ingest_for_detection(clouds[0], time.perf_counter())
+        assert node._job is not None and node.map.clear_pending  # for the idle detector
+        node._detecting = True
+        node._ingest_for_detection(clouds[1], time.perf_counter())
+        assert node.counters["detections_skipped"] == 1 and not node.map.clear_pending
+        pending = []
+        for frames in clouds[1:]:  # 0.1 s apart: detections due at 1.1 and 1.3 s, not 1.2
+            limited._ingest_for_detection(frames, time.perf_counter())
+            pending.append((limited.map.clear_pending, limited._job is not None))
+            limited._job = None
+        assert pending == [(True, True), (False, False), (True, True)]

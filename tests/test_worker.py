@@ -199,3 +199,35 @@ def test_surfaces_first_part_then_the_whole_detection(rng):
         _same(w.detect(shifted), incremental.full(shifted, DetectParams()))
     finally:
         w.close()
+
+
+@pytest.mark.parametrize("surfaces_first", [False, True])
+def test_on_sent_runs_once_the_worker_has_the_points(rng, surfaces_first):
+    """on_sent runs while the worker detects: the caller may change its points from then on
+    (the node clears its map then). A failing on_sent does not leave the worker's replies to be
+    taken for the next detection's."""
+    pts = _scene(rng)
+    want = incremental.full(pts, DetectParams())
+    parts: list[incremental.Items] = []
+    on_surfaces = parts.append if surfaces_first else None
+    calls = []
+    w = _started()
+    try:
+        mine = pts.copy()
+
+        def overwrite() -> None:
+            calls.append(len(parts))
+            mine[:] = 0.0  # sent already: the worker detects on what it got
+
+        _same(w.detect(mine, on_surfaces=on_surfaces, on_sent=overwrite), want)
+        assert calls == [0] and len(parts) == int(surfaces_first)
+
+        def fail() -> None:
+            raise ValueError("map gone")
+
+        with pytest.raises(ValueError, match="map gone"):
+            w.detect(pts, on_surfaces=on_surfaces, on_sent=fail)
+        shifted = pts + (1.0, 0.0, 0.0)
+        _same(w.detect(shifted, on_surfaces=on_surfaces), incremental.full(shifted, DetectParams()))
+    finally:
+        w.close()

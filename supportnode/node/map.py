@@ -285,12 +285,15 @@ class _ScanGrid(NamedTuple):
 
 @dataclass
 class Touched:
-    """What one :meth:`VoxelMap.integrate` changed.
+    """What one :meth:`VoxelMap.integrate` (or :meth:`VoxelMap.finish`) changed.
 
-    keys: (T, 3) int64 voxels hit by the scan (all still in the map when returned).
-    removed: (R, 3) int64 voxels removed by this call (free-space clearing and forgetting).
+    keys: (T, 3) int64 voxels hit by the scan (all still in the map when returned, unless
+        its clearing and forgetting were deferred: :meth:`VoxelMap.finish` may remove some).
+    removed: (R, 3) int64 voxels removed by this call (free-space clearing and forgetting,
+        including a previous scan's deferred ones that this call ran first: a voxel removed
+        then and hit again by this scan is in both).
     lo, hi: (3,) float64 bounding box of the scan's points in the map frame, metres
-        (lo > hi componentwise for an empty scan).
+        (lo > hi componentwise for an empty scan, and for :meth:`VoxelMap.finish`).
     """
 
     keys: np.ndarray
@@ -361,6 +364,9 @@ class VoxelMap:
         # equal points (the node then reuses its detection).
         self.version = 0
         self._last_pass: tuple[float, np.ndarray] | None = None
+        # The clearing and forgetting that integrate(defer_clear=True) left for finish():
+        # the scan's map frame columns, its ray origin and its stamp.
+        self._deferred: tuple[list[np.ndarray], np.ndarray, float] | None = None
         self._stats = dict.fromkeys(
             (
                 "scans",
@@ -464,6 +470,7 @@ class VoxelMap:
         stamp: float,
         *,
         in_map_frame: bool = False,
+        defer_clear: bool = False,
     ) -> Touched:
         """Merge one scan.
 
@@ -472,6 +479,11 @@ class VoxelMap:
         pose: (4, 4) sensor-to-map transform; its translation is the ray origin for clearing
             and the centre of the radius crop.
         stamp: seconds, non-decreasing across calls (ages are measured from the newest stamp).
+        defer_clear: only merge; the scan's free-space clearing and forgetting wait for
+            :meth:`finish` (a node runs them while its detection works on the merged map's
+            points). A clearing still pending from the previous scan runs first, here, so the
+            map goes through the same states either way: scan k's clearing always comes
+            before scan k + 1's merge.
         Returns the voxels hit and removed, and the scan's bounding box (:class:`Touched`).
         """
         pts = np.asarray(points, dtype=np.float64)
@@ -480,6 +492,7 @@ class VoxelMap:
             raise InputError(f"points must be an (N, 3) array, got shape {pts.shape}")
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise InputError("pose must be a finite (4, 4) sensor-to-map transform")
+        before = self.finish().removed
         # Column by column: numpy reduces the short axis of an (N, 3) array 5-20x slower.
         finite = np.isfinite(pts[:, 0] + pts[:, 1] + pts[:, 2])
         if not finite.all():
@@ -505,18 +518,44 @@ class VoxelMap:
         self._stats["points_merged"] += npts
 
         slots, keys = self._merge(cols, float(stamp), origin)
-        removed = []
-        if self.params.clear_free_space and npts:
-            removed.append(self._clear(cols, origin))
-        removed.append(self._maybe_forget(float(stamp), origin))
+        lo = np.array([c.min() for c in cols]) if npts else np.full(3, np.inf)
+        hi = np.array([c.max() for c in cols]) if npts else np.full(3, -np.inf)
+        if defer_clear:
+            if in_map_frame:  # columns that may share memory with the caller's points
+                cols = [c if c.base is None else c.copy() for c in cols]
+            self._deferred = (cols, origin, float(stamp))
+            return Touched(keys, before, lo, hi)
+        removed = [before, self._clear_and_forget(cols, origin, float(stamp))]
         # The scan's keys are those of its slots: no gather from the store unless clearing
         # or forgetting removed some of them.
         alive = self._alive[slots]
         if not alive.all():
             keys = keys[alive]
-        lo = np.array([c.min() for c in cols]) if npts else np.full(3, np.inf)
-        hi = np.array([c.max() for c in cols]) if npts else np.full(3, -np.inf)
         return Touched(keys, np.concatenate(removed), lo, hi)
+
+    @property
+    def clear_pending(self) -> bool:
+        """True while the last scan's clearing and forgetting wait for :meth:`finish`."""
+        return self._deferred is not None
+
+    def finish(self) -> Touched:
+        """Run the clearing and forgetting that ``integrate(..., defer_clear=True)`` left
+        pending (none: nothing happens). Returns what they removed, as a :class:`Touched`
+        with no keys and an empty box (``removed`` (R, 3) int64)."""
+        pending, self._deferred = self._deferred, None
+        removed = (
+            np.zeros((0, 3), np.int64) if pending is None else self._clear_and_forget(*pending)
+        )
+        return Touched(np.zeros((0, 3), np.int64), removed, np.full(3, np.inf), np.full(3, -np.inf))
+
+    def _clear_and_forget(self, cols: list[np.ndarray], origin: np.ndarray, stamp: float):
+        """The end of a scan's integration: free-space clearing along its rays, then the
+        radius, age and cap pass when due; returns the removed (R, 3) keys."""
+        removed = []
+        if self.params.clear_free_space and len(cols[0]):
+            removed.append(self._clear(cols, origin))
+        removed.append(self._maybe_forget(stamp, origin))
+        return np.concatenate(removed)
 
     def points(self, keys: np.ndarray | None = None) -> np.ndarray:
         """Representative points for detection: (P, 3) float64, map frame, metres.
@@ -610,7 +649,10 @@ class VoxelMap:
         }
 
     def forget(self, stamp: float, position: np.ndarray) -> np.ndarray:
-        """Run the radius/age/cap pass now (no slack). Returns the removed (R, 3) keys."""
+        """Run the radius/age/cap pass now (no slack), after any clearing still pending (its
+        removed keys are not returned: call :meth:`finish` first for those). Returns the
+        removed (R, 3) keys."""
+        self.finish()
         return self._forget(float(stamp), np.asarray(position, dtype=np.float64))
 
     def stats(self) -> dict[str, int]:

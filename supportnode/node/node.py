@@ -13,6 +13,13 @@ that is due within a scan period (see `_detect_loop`). The detection thread hand
 points to a worker process (``node.detect_process``, `supportnode.node.worker`), so that the
 merge and the detection do not take turns at one interpreter lock. If the worker dies, the
 thread detects by itself meanwhile and the worker is restarted (at most _WORKER_RESTARTS times).
+With ``node.defer_clear`` the receiving thread only merges a scan, and its free-space clearing
+(and forgetting) waits until the detection of that scan has the map's points: it runs in the
+detection thread once the worker has them, while it detects, or after the detection when no
+worker took them. A scan that no detection takes at once (the detector busy, or none due) is
+cleared by the receiving thread right after its merge, and any clearing still pending runs
+before the next merge: the map goes through the same states as without, and a detection sees
+the clearing of the scans before its own.
 With ``node.surfaces_first`` a detection's surfaces and their free space go out as soon as they
 are known, and its obstacles (same ``seq``) once their hulls and boxes are computed.
 
@@ -104,6 +111,11 @@ class MapLike(Protocol):
     def stats(self) -> dict[str, int]: ...
 
 
+# A map may also defer a scan's clearing: ``integrate(..., defer_clear=True)`` then only merges,
+# ``finish()`` runs the clearing (returning what it removed, a Touched-like ``removed``) and
+# ``clear_pending`` says whether one waits (`VoxelMap`). Maps without ``finish`` never defer.
+
+
 @dataclass
 class NodeOutput:
     """What one scan produced.
@@ -148,6 +160,7 @@ class _Job:
     generation: int  # of the map it went into (a reset starts a new one)
     t_recv: float = 0.0  # perf_counter when it was received (threaded spin)
     t_ready: float = 0.0  # perf_counter when it was merged and handed to detection
+    merge: int = 0  # number of its merge into the map (Node._merges after it)
 
 
 def quaternion_matrix(q: np.ndarray) -> np.ndarray:
@@ -280,9 +293,11 @@ class Node(Closing):
         self._pub_lock = threading.Lock()
         self._job_ready = threading.Condition()
         self._job: _Job | None = None
+        self._detecting = False  # the detection thread has taken a job and works on it
         self._scan_period: float | None = None  # running mean of the time between scans, s
         self._last_recv: float | None = None
         self._generation = 0
+        self._merges = 0  # scans merged into the map (any map: not reset)
         self._worker: DetectionWorker | None = None
         self._worker_restart_at: float | None = None  # monotonic time of the next start
         self._worker_starts = 0
@@ -334,9 +349,10 @@ class Node(Closing):
         self.latency.add_all(timings)
         return out
 
-    def _ingest(self, cloud: PointCloud, timings: dict[str, float]) -> _Job:
+    def _ingest(self, cloud: PointCloud, timings: dict[str, float], defer: bool = False) -> _Job:
         """Gravity and map update of one scan; the region it touched joins the pending region
-        that the next detection recomputes. Holds the map lock."""
+        that the next detection recomputes. Holds the map lock. defer: leave the scan's
+        clearing pending in the map (see `_finish_map`), when the map can."""
         if cloud.count == 0:
             raise InputError("scan has no finite points")
         with self._lock:
@@ -365,14 +381,20 @@ class Node(Closing):
             timings["gravity"] = time.perf_counter() - t
 
             t = time.perf_counter()
-            touched = self.map.integrate(cloud.points, pose, stamp)
+            # The previous scan's clearing, when nothing ran it yet: before this merge.
+            self._finish_map()
+            if defer and hasattr(self.map, "finish"):
+                touched = self.map.integrate(cloud.points, pose, stamp, defer_clear=True)
+            else:
+                touched = self.map.integrate(cloud.points, pose, stamp)
             self._last_stamp = stamp
+            self._merges += 1
             self._pending_region(touched)
             timings["map"] = time.perf_counter() - t
             self.counters["scans_processed"] += 1
             frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
             self._posed, self._frame = cloud.pose is not None, cloud.frame_id
-            return _Job(pose, stamp, frame, self._generation)
+            return _Job(pose, stamp, frame, self._generation, merge=self._merges)
 
     def _detection_due(self, stamp: float) -> bool:
         rate = self.cfg.detection_rate
@@ -404,6 +426,22 @@ class Node(Closing):
         if self._pending is not None:
             lo, hi = np.minimum(lo, self._pending[0]), np.maximum(hi, self._pending[1])
         self._pending = (lo, hi)
+
+    def _finish_map(self, merge: int | None = None) -> None:
+        """Run the clearing that the map's last merge left pending (``node.defer_clear``), if
+        any; what it removed joins the pending region, so the next detection recomputes there
+        (the map's version changed with it, so no detection is reused across it). merge: only
+        if the last merge is still that one (`_Job.merge`: a detection's scan; a newer one is
+        the receiving thread's to clear, and after a reset the pending clearing went with the
+        old map). Call with the map lock held."""
+        m = self.map
+        if (merge is not None and merge != self._merges) or not getattr(m, "clear_pending", False):
+            return
+        t = time.perf_counter()
+        done = m.finish()
+        if len(done.removed):
+            self._pending_region(done)
+        self.latency.add("clear", time.perf_counter() - t)
 
     def _detect_job(
         self,
@@ -461,6 +499,7 @@ class Node(Closing):
             t = time.perf_counter()
             with self._lock:
                 raw = self.map.points()
+                deferred = bool(getattr(self.map, "clear_pending", False))
             points = raw if level else transform_points(raw, rotation)
             fetch_time[0] += time.perf_counter() - t
             on_surfaces = None
@@ -477,7 +516,15 @@ class Node(Closing):
                         )
                     publish_surfaces(early[0].message)
 
-            items = self._full(points, on_surfaces)
+            after_send = None
+            if deferred:
+
+                def after_send() -> None:
+                    # The map's points are with the worker: its clearing now, beside the
+                    # detection, not before the next merge.
+                    self._finish_map_safely(job.merge, wait=False)
+
+            items = self._full(points, on_surfaces, after_send)
             if items is None:
                 return None  # stopped while the worker was detecting
         if not reused:
@@ -504,11 +551,16 @@ class Node(Closing):
             return out
 
     def _full(
-        self, points: np.ndarray, on_surfaces: Callable[[Items], None] | None = None
+        self,
+        points: np.ndarray,
+        on_surfaces: Callable[[Items], None] | None = None,
+        after_send: Callable[[], None] | None = None,
     ) -> Items | None:
         """Full detection on (N, 3) detection-frame points: in the worker process when it
         is up, else in this thread. None when the node stopped during the detection.
-        on_surfaces: see `incremental.full`."""
+        on_surfaces: see `incremental.full`. after_send: called once the worker has the
+        points, while it detects (`DetectionWorker.detect`'s on_sent); not called when the
+        detection runs in this thread."""
         self._start_worker_when_due()
         w = self._worker
         try:
@@ -516,7 +568,7 @@ class Node(Closing):
                 if self._worker_logged != w.pid:
                     self._worker_logged = w.pid
                     self.log.info("detection worker ready (pid %d)", w.pid)
-                items = w.detect(points, self._stop, on_surfaces)
+                items = w.detect(points, self._stop, on_surfaces, on_sent=after_send)
                 self.counters["worker_detections"] += 1
                 return items
         except WorkerError as err:
@@ -748,6 +800,7 @@ class Node(Closing):
         worker = None
         if self.cfg.pipeline:
             self._job = None
+            self._detecting = False
             if self.cfg.detect_process:
                 self._worker_restart_at, self._worker_starts = time.monotonic(), 0
                 self._start_worker_when_due()  # the worker imports while scans arrive
@@ -789,6 +842,7 @@ class Node(Closing):
                 with self._job_ready:
                     self._job_ready.notify_all()
                 worker.join(5.0)
+                self._finish_map_safely()  # the map as integrate would leave it
             if self._worker is not None:
                 self._worker.close()
                 self._worker = None
@@ -805,7 +859,7 @@ class Node(Closing):
             return
         timings: dict[str, float] = {"decode": time.perf_counter() - t_recv}
         try:
-            job = self._ingest(msg, timings)
+            job = self._ingest(msg, timings, defer=self.cfg.defer_clear)
         except SupportNodeError as err:
             self._reject("unusable", f"scan seq {msg.seq}: {err}")
             return
@@ -815,6 +869,7 @@ class Node(Closing):
             return
         self.latency.add_all(timings)
         if not self._detection_due(job.stamp):
+            self._finish_map_safely()  # no detection takes this scan: its clearing now
             return
         job.t_recv, job.t_ready = t_recv, time.perf_counter()
         if self._last_recv is not None:
@@ -829,7 +884,13 @@ class Node(Closing):
                 # and the next detection covers both (the map has every scan either way).
                 self.counters["detections_skipped"] += 1
             self._job = job
+            busy = self._detecting
             self._job_ready.notify()
+        if busy:
+            # The detector is busy: this scan's clearing now, before the next scan comes and
+            # while the detector could not take this one anyway (it takes the map's state as
+            # it is when it gets to it).
+            self._finish_map_safely()
 
     def _detect_loop(self) -> None:
         """Detection thread: detect on the newest ingested scan, publish, repeat.
@@ -861,6 +922,7 @@ class Node(Closing):
                     if self._stop.is_set():
                         return
                 job, self._job = self._job, None
+                self._detecting = True
             timings: dict[str, float] = {}
             t = time.perf_counter()
             early = None
@@ -876,12 +938,33 @@ class Node(Closing):
                 self._reject("internal_error", f"detection: {type(err).__name__}: {err}")
                 out = None
             done_at = time.perf_counter()
-            if out is None:
-                continue
-            timings["detect"] = time.perf_counter() - t
-            timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
-            self.latency.add_all(timings)
-            self._publish(out, job.t_recv)
+            if out is not None:
+                timings["detect"] = time.perf_counter() - t
+                timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
+                self.latency.add_all(timings)
+                self._publish(out, job.t_recv)
+            # The scan's clearing if no detection ran it beside the worker (detection reused,
+            # regional or in this thread): now, rather than before the next merge. (A scan
+            # merged meanwhile had its clearing run by the receiving thread, and one being
+            # merged runs it first.)
+            self._finish_map_safely(job.merge, wait=False)
+            with self._job_ready:
+                self._detecting = False
+
+    def _finish_map_safely(self, merge: int | None = None, wait: bool = True) -> None:
+        """`_finish_map` from spin's threads, taking the map lock; an error is logged and
+        counted, not raised (the clearing is not retried). wait: False gives up when the
+        lock is taken (the receiving thread merging the next scan, which runs the pending
+        clearing first: the detection thread does not wait for a merge)."""
+        if not self._lock.acquire(blocking=wait):
+            return
+        try:
+            self._finish_map(merge)
+        except Exception as err:
+            self.log.exception("internal error in the map's clearing")
+            self._reject("internal_error", f"clearing: {type(err).__name__}: {err}")
+        finally:
+            self._lock.release()
 
     def _publish(self, out: NodeOutput, t_recv: float) -> None:
         """Send a detection's messages: obstacles then surfaces, or with node.surfaces_first

@@ -106,10 +106,15 @@ class DetectionWorker:
         points: np.ndarray,
         stop: threading.Event | None = None,
         on_surfaces: Callable[[Items], None] | None = None,
+        on_sent: Callable[[], None] | None = None,
     ) -> Items:
         """`incremental.full` of (N, 3) points in the worker (on_surfaces as there, called
         in this thread); raises WorkerError when the worker is gone or ``stop`` is set while
-        waiting, RuntimeError for an error in the detection itself (the worker goes on)."""
+        waiting, RuntimeError for an error in the detection itself (the worker goes on).
+        on_sent: called in this thread once the points are sent, while the worker detects
+        (the caller's own work beside the detection; ``points`` may change from then on);
+        not called when sending fails. An error it raises is raised once the worker's reply
+        has been read."""
         if not self.ready() or self._conn is None:
             raise WorkerError("detection worker not ready")
         pts = np.ascontiguousarray(points)
@@ -117,6 +122,14 @@ class DetectionWorker:
         try:
             self._conn.send((pts.shape, pts.dtype.str, on_surfaces is not None))
             self._conn.send_bytes(pts)
+            if on_sent is not None:
+                try:
+                    on_sent()
+                except BaseException:
+                    # The reply is on its way: read it, or the next detection takes it.
+                    if self._reply(stop)[0] == "surfaces":
+                        self._reply(stop)
+                    raise
             reply = self._reply(stop)
             if reply[0] == "surfaces":
                 assert on_surfaces is not None
