@@ -310,9 +310,10 @@ class NodeParams:
     )
     defer_clear: bool = param(
         True,
-        "pipeline: clear each scan's free space (and forget stale voxels) after its detection "
-        "took the map's points, while the detection runs, rather than before it; detection "
-        "then sees a removed object one scan longer (false: clear before detecting)",
+        "pipeline: clear each scan's free space (and forget stale voxels) once its detection "
+        "has the map's points, beside the detection, or right after the merge when no "
+        "detection takes the scan at once; a detection then sees a removed object one scan "
+        "longer (false: within the merge, before detecting)",
     )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
