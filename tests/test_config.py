@@ -264,6 +264,10 @@ def test_out_of_range(tmp_path: Path) -> None:
             "node.detect_process: expected true or false, got 'maybe'",
         ),
         (
+            "node:\n  defer_clear: 2\n",
+            "node.defer_clear: expected true or false, got 2",
+        ),
+        (
             "surfaces:\n  normal_filter: 'true'\n",
             "surfaces.normal_filter: expected true or false, got 'true'",
         ),
