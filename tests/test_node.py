@@ -398,6 +398,45 @@ def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
     assert total < 0.75, total
 
 
+def test_busy_detector_waits_for_the_next_scan_as_long_as_its_merge_takes(rng, monkeypatch):
+    """Scans every 0.2 s, each merged in 0.12 s (over half a period), detection 0.5 s: when
+    the detector becomes free the newest scan has waited for it, and the next one is ready 0.32
+    s after that one arrived. The detector waits for it (a period and 1.5 merges, 0.38 s), so
+    results are a merge and a detection old, not a detection and a wait."""
+    from supportnode.node import incremental
+    from supportnode.node.map import VoxelMap
+
+    integrate, full = VoxelMap.integrate, incremental.full
+
+    def slow_integrate(self, *a, **kw):
+        time.sleep(0.12)
+        return integrate(self, *a, **kw)
+
+    def slow_full(*a, **kw):
+        time.sleep(0.5)
+        return full(*a, **kw)
+
+    monkeypatch.setattr(VoxelMap, "integrate", slow_integrate)
+    monkeypatch.setattr(incremental, "full", slow_full)
+    pose = _sensor_pose(0, 0, 1.5)
+    pts = _platform(rng, 0, 0) - pose[:3, 3]
+    n = 16
+    with _spinning("surfaces", False, detect_process=False) as (node, pub, _):
+        t0 = time.monotonic()
+        for i in range(n):
+            pub.publish(_cloud(pts + 0.001 * i, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+            time.sleep(max(t0 + 0.2 * (i + 1) - time.monotonic(), 0.0))
+        deadline = time.monotonic() + 10
+        while node._job is not None or node._detecting:
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        total = node.latency.stats()["total"].p50  # receive to results
+    # Merge 0.12 s + detection 0.5 s = 0.62 s. The old deadline (1.5 periods, 0.3 s after the
+    # waiting scan arrived) gave up on the next scan 0.02 s before it was merged: the waiting
+    # scan was detected 0.3 + 0.5 = 0.8 s after it arrived.
+    assert total < 0.72, total
+
+
 def test_real_kinect_sequence_keeps_its_points_and_ids(real_scans):
     """Three real Kinect-class frames (0.25 s apart, a laptop and a box on a table), fed in a
     loop with gravity estimated from normals: once the map has seen them, a scan renews the

@@ -296,6 +296,7 @@ class Node(Closing):
         self._detecting = False  # the detection thread has taken a job and works on it
         self._scan_period: float | None = None  # running mean of the time between scans, s
         self._last_recv: float | None = None
+        self._ingest_time: float | None = None  # running mean of receive to merged, s
         self._generation = 0
         self._merges = 0  # scans merged into the map (any map: not reset)
         self._worker: DetectionWorker | None = None
@@ -878,6 +879,10 @@ class Node(Closing):
                 dt if self._scan_period is None else 0.8 * self._scan_period + 0.2 * dt
             )
         self._last_recv = t_recv
+        took = job.t_ready - t_recv
+        self._ingest_time = (
+            took if self._ingest_time is None else 0.8 * self._ingest_time + 0.2 * took
+        )
         with self._job_ready:
             if self._job is not None:
                 # Detection is still busy with an older scan: that one's region stays pending,
@@ -899,7 +904,8 @@ class Node(Closing):
         and is old; when scans come regularly, the next one is due within a scan period, and
         detecting that one instead gives results that are as frequent but fresher (latency =
         merge + detection, with no wait for a busy detector in it). So the detector waits for
-        it, up to one and a half periods after the old one arrived (at most
+        it, up to one and a half periods after the old one arrived, or one period and one and a
+        half merges when merging takes longer than a third of a period (at most
         ``_FRESH_WAIT_MAX_S``), and takes the old scan if none comes: the last scan of a stream
         is always detected. A scan merged after the detector became free has not waited (it
         arrived during the detection, but its merge took longer): it is taken at once."""
@@ -911,9 +917,13 @@ class Node(Closing):
                 if self._stop.is_set():
                     return
                 job = self._job
-                period = self._scan_period
+                period, ingest = self._scan_period, self._ingest_time or 0.0
                 if job.t_ready < done_at and period is not None:
-                    deadline = job.t_recv + min(1.5 * period, _FRESH_WAIT_MAX_S)
+                    # The next scan is due a period after this one and ready a merge later.
+                    # A fixed 1.5 periods missed it whenever the merge took half a period,
+                    # and the latency jumped by a period.
+                    wait = max(1.5 * period, period + 1.5 * ingest)
+                    deadline = job.t_recv + min(wait, _FRESH_WAIT_MAX_S)
                     while self._job is job and not self._stop.is_set():
                         left = deadline - time.perf_counter()
                         if left <= 0:
