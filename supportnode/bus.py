@@ -38,7 +38,7 @@ import itertools
 import os
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TypeAlias
 
@@ -270,6 +270,11 @@ class Publisher(_Socket):
     ``hwm`` messages queue per subscriber before newer ones are dropped for that subscriber
     (a publisher never blocks on a slow consumer). ``endpoint`` holds the resolved address.
     ``curve``: optional CURVE keys (server when binding, client when connecting).
+    ``check``: called with each message of our topics within the size limit as it comes off
+    the socket; it returns what to keep in the message's place (what `recv` then returns), or
+    None to refuse the message (counted in ``refused``; the check reports why). Refused messages
+    take no place in the queue: a stream of malformed messages cannot push out the newest good
+    one.
     """
 
     def __init__(
@@ -329,6 +334,7 @@ class Subscriber(_Socket):
         max_message_bytes: int | None = None,
         rcvhwm: int | None = None,
         curve: CurveKeys | None = None,
+        check: Callable[[Frames], Any] | None = None,
     ) -> None:
         if keep_newest < 1:
             raise ValueError(f"keep_newest must be at least 1, got {keep_newest}")
@@ -344,7 +350,10 @@ class Subscriber(_Socket):
         self.oversized = 0  # messages above max_message_bytes
         self.last_oversized: tuple[bytes, int] | None = None  # (topic, bytes) of the latest
         self.received = 0  # messages of our topics taken off the socket
-        self._pending: collections.deque[Frames] = collections.deque()
+        self.refused = 0  # messages that ``check`` refused
+        self._check = check
+        # (topic, message or what check made of it), oldest first
+        self._pending: collections.deque[tuple[bytes, Any]] = collections.deque()
         super().__init__(zmq.SUB, context)
         try:
             # A small receive queue bounds the memory held by unread (large) scans; drain
@@ -366,17 +375,18 @@ class Subscriber(_Socket):
         """Messages received and kept but not yet returned by `recv`."""
         return len(self._pending)
 
-    def recv(self, timeout_s: float | None = None) -> Frames | None:
+    def recv(self, timeout_s: float | None = None) -> Frames | Any | None:
         """The oldest kept message after draining the socket, or None after ``timeout_s``.
 
         ``timeout_s``: None waits forever, 0 only looks. Frame 0 is the topic (bytes); payload
-        frames are zero-copy memoryviews valid as long as they are referenced.
+        frames are zero-copy memoryviews valid as long as they are referenced. With a
+        ``check``: what it returned for the message.
         """
         deadline = None if timeout_s is None else time.monotonic() + max(0.0, timeout_s)
         while True:
             self._drain()
             if self._pending:
-                return self._pending.popleft()
+                return self._pending.popleft()[1]
             if deadline is None:
                 wait_ms = _WAIT_SLICE_MS
             else:
@@ -425,12 +435,16 @@ class Subscriber(_Socket):
                 self.last_oversized = (topic, size)
                 return
         frames: Frames = [topic, *(p.buffer for p in parts[1:])]
-        self._pending.append(frames)
+        item = frames if self._check is None else self._check(frames)
+        if item is None:
+            self.refused += 1
+            return
+        self._pending.append((topic, item))
         # Per topic, like one ROS subscription queue each: a burst of obstacles must not push
         # out the newest surfaces. The queue holds at most topics x keep_newest messages.
-        if sum(1 for f in self._pending if f[0] == topic) > self.keep_newest:
-            for i, old in enumerate(self._pending):
-                if old[0] == topic:
+        if sum(1 for t, _ in self._pending if t == topic) > self.keep_newest:
+            for i, (old, _) in enumerate(self._pending):
+                if old == topic:
                     del self._pending[i]
                     self.dropped += 1
                     break

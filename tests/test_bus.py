@@ -99,6 +99,35 @@ def test_keep_newest_drops_old_messages(keep):
     assert len(got) + sub.dropped <= n
 
 
+def test_refused_messages_do_not_push_out_the_newest_good_one():
+    """A check refuses malformed messages as they come off the socket: a scan followed by
+    garbage is kept (keep_newest=1), the garbage is counted as refused, not the scan as
+    dropped; recv returns what the check made of the message."""
+    seen = []
+
+    def parse(frames):
+        payload = bytes(frames[1])
+        seen.append(payload)
+        return payload.decode() if payload == b"probe" or payload.isdigit() else None
+
+    with (
+        Publisher("tcp://127.0.0.1:*") as pub,
+        Subscriber(pub.endpoint, "scan", keep_newest=1, check=parse) as sub,
+    ):
+        _connected(pub, sub)
+        for i in range(3):
+            pub.send([b"scan", str(i).encode()])
+            pub.send([b"scan", b"\xc1 not a scan"])
+            pub.send([b"scan", b""])
+        time.sleep(0.2)  # all of it has arrived: the consumer was busy
+        got = []
+        while (item := sub.recv(0.1)) is not None:
+            got.append(item)
+    assert got == ["2"]
+    assert sub.refused == 6 and sub.dropped == 2  # scans 0 and 1: older good ones
+    assert seen.count(b"\xc1 not a scan") == 3
+
+
 def test_recv_timeout_returns_none_promptly():
     with Subscriber("inproc://nothing-here", "scan") as sub:
         t0 = time.monotonic()

@@ -695,6 +695,37 @@ def test_deferred_clearing_region_is_detected_again(rng):
     assert box_points_seen(outs[True][-1]) < 0.7 * box_points_seen(outs[True][2])
 
 
+def test_published_map_has_the_pending_clearing_done(rng):
+    """Between a scan's merge and its deferred clearing (node.defer_clear), the map that goes
+    out on the map topic is the cleared one: the removed box is not in it."""
+    pose = _sensor_pose(-2.0, 0, 1.2)
+    clouds = _removed_box_clouds(rng, pose, 12)
+
+    def box_voxels(cloud):
+        p = cloud.points
+        return int(np.sum((np.abs(p[:, :2]) < 0.2).all(axis=1) & (p[:, 2] > 0.55)))
+
+    with Node(incremental=False) as ref, Node(incremental=False) as node:
+        for cloud in clouds:
+            ref.process(cloud)  # clears within the merge
+            node._ingest(cloud, {}, defer=True)
+            assert node.map.clear_pending
+            with node._lock:
+                got = node.map_cloud()
+            assert not node.map.clear_pending
+            want = ref.map_cloud()
+            assert np.array_equal(np.sort(got.points, 0), np.sort(want.points, 0))
+        # Where the rays cross it (its top and the side facing the sensor) the box is gone.
+        left, first = box_voxels(node.map_cloud()), box_voxels(_first_map(rng, pose))
+    assert left < 0.2 * first, (left, first)
+
+
+def _first_map(rng, pose):
+    with Node(incremental=False) as node:
+        node.process(_removed_box_clouds(rng, pose, 1)[0])
+        return node.map_cloud()
+
+
 def test_clearing_pending_at_a_reset_is_dropped(rng):
     """A source that restarted (a stamp back in time) resets the map: the old map's pending
     clearing goes with it, never onto the new map (its forgetting, at the old stamp 20 s,

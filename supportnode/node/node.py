@@ -48,7 +48,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 import zmq
@@ -137,6 +137,14 @@ class NodeOutput:
     items: Items | None = None
     reused: bool = False
     surfaces_sent: bool = False  # published already, ahead of the obstacles (surfaces_first)
+
+
+class _Decoded(NamedTuple):
+    """A scan decoded as it came off the socket (``Subscriber``'s check), and how long that
+    took, s."""
+
+    cloud: PointCloud
+    seconds: float
 
 
 @dataclass
@@ -680,11 +688,9 @@ class Node(Closing):
     def handle(self, frames: Any) -> NodeOutput | None:
         """Decode one received message and process it; a message the node cannot use is
         counted in ``rejects`` by reason, logged (rate-limited) and None is returned."""
-        t = time.perf_counter()
-        msg = self._decode(frames)
+        msg, decode = self._decoded(frames)
         if msg is None:
             return None
-        decode = time.perf_counter() - t
         try:
             out = self.process(msg)
         except SupportNodeError as err:
@@ -697,6 +703,22 @@ class Node(Closing):
         out.timings["decode"] = decode
         self.latency.add("decode", decode)
         return out
+
+    def _check_scan(self, frames: Any) -> _Decoded | None:
+        """The scan subscriber's check: a message is decoded as it comes off the socket, so
+        that only usable scans take a place in the newest-scans queue (a malformed message
+        after a scan must not push it out)."""
+        t = time.perf_counter()
+        msg = self._decode(frames)
+        return None if msg is None else _Decoded(msg, time.perf_counter() - t)
+
+    def _decoded(self, frames: Any) -> tuple[PointCloud | None, float]:
+        """(scan or None, seconds it took to decode) of raw frames or a `_Decoded`."""
+        if isinstance(frames, _Decoded):
+            return frames.cloud, frames.seconds
+        t = time.perf_counter()
+        msg = self._decode(frames)
+        return msg, time.perf_counter() - t
 
     def _decode(self, frames: Any) -> PointCloud | None:
         """The scan in ``frames``, or None (counted and logged) when it is not a usable one."""
@@ -737,6 +759,7 @@ class Node(Closing):
                 context=self._context,
                 max_message_bytes=self.cfg.max_message_bytes,
                 curve=curve,
+                check=self._check_scan,
             )
         except BaseException:
             self._pub.close()
@@ -824,7 +847,8 @@ class Node(Closing):
                             f"{self.cfg.max_message_bytes}",
                         )
                 if frames is not None:
-                    t_recv = time.perf_counter()
+                    # Received when decoding began: the subscriber decoded it off the socket.
+                    t_recv = time.perf_counter() - getattr(frames, "seconds", 0.0)
                     if worker is not None:
                         self._ingest_for_detection(frames, t_recv)
                     else:
@@ -855,10 +879,10 @@ class Node(Closing):
 
     def _ingest_for_detection(self, frames: Any, t_recv: float) -> None:
         """Receiving thread: decode, merge into the map, hand the newest scan to detection."""
-        msg = self._decode(frames)
+        msg, decode = self._decoded(frames)
         if msg is None:
             return
-        timings: dict[str, float] = {"decode": time.perf_counter() - t_recv}
+        timings: dict[str, float] = {"decode": decode}
         try:
             job = self._ingest(msg, timings, defer=self.cfg.defer_clear)
         except SupportNodeError as err:
@@ -1058,9 +1082,12 @@ class Node(Closing):
 
     def map_cloud(self) -> PointCloud | None:
         """The map as a PointCloud: one point per voxel (its points' mean, at most
-        MAP_MAX_POINTS), in the results' frame; None before the first scan."""
+        MAP_MAX_POINTS), in the results' frame; None before the first scan. A clearing the
+        last merge left pending (``node.defer_clear``) runs first: the map a subscriber sees
+        has every merged scan's free space cleared. Call with the map lock held."""
         if self._last_stamp is None or not hasattr(self.map, "centroids"):
             return None
+        self._finish_map()
         pts = transform_points(self.map.centroids(MAP_MAX_POINTS), self.gravity.rotation)
         frame = self.cfg.frame_id if self._posed else self._frame
         self._map_seq += 1
