@@ -358,24 +358,29 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
         assert c["scans_processed"] + c["scans_dropped"] == n
 
 
-def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
-    """A scan that arrives while detection runs, but whose merge ends after it, has not waited
-    for the detector: it is detected at once, not held back in the hope of a fresher one."""
+def _slow_stages(monkeypatch, merge_s: float, detect_s: float) -> None:
+    """Every merge into the map and every full detection take this much longer (s)."""
     from supportnode.node import incremental
     from supportnode.node.map import VoxelMap
 
     integrate, full = VoxelMap.integrate, incremental.full
 
     def slow_integrate(self, *a, **kw):
-        time.sleep(0.15)
+        time.sleep(merge_s)
         return integrate(self, *a, **kw)
 
     def slow_full(*a, **kw):
-        time.sleep(0.4)
+        time.sleep(detect_s)
         return full(*a, **kw)
 
     monkeypatch.setattr(VoxelMap, "integrate", slow_integrate)
     monkeypatch.setattr(incremental, "full", slow_full)
+
+
+def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
+    """A scan that arrives while detection runs, but whose merge ends after it, has not waited
+    for the detector: it is detected at once, not held back in the hope of a fresher one."""
+    _slow_stages(monkeypatch, merge_s=0.15, detect_s=0.4)
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
     n = 6
@@ -403,21 +408,7 @@ def test_busy_detector_waits_for_the_next_scan_as_long_as_its_merge_takes(rng, m
     the detector becomes free the newest scan has waited for it, and the next one is ready 0.32
     s after that one arrived. The detector waits for it (a period and 1.5 merges, 0.38 s), so
     results are a merge and a detection old, not a detection and a wait."""
-    from supportnode.node import incremental
-    from supportnode.node.map import VoxelMap
-
-    integrate, full = VoxelMap.integrate, incremental.full
-
-    def slow_integrate(self, *a, **kw):
-        time.sleep(0.12)
-        return integrate(self, *a, **kw)
-
-    def slow_full(*a, **kw):
-        time.sleep(0.5)
-        return full(*a, **kw)
-
-    monkeypatch.setattr(VoxelMap, "integrate", slow_integrate)
-    monkeypatch.setattr(incremental, "full", slow_full)
+    _slow_stages(monkeypatch, merge_s=0.12, detect_s=0.5)
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
     n = 16
