@@ -403,6 +403,37 @@ def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
     assert total < 0.75, total
 
 
+def test_decoder_bug_is_a_reject_not_the_end_of_the_node(rng, monkeypatch):
+    """An unexpected error while decoding a message off the socket (a bug, not a malformed
+    message) is logged, counted as an internal_error reject, and the node goes on with the
+    next scan."""
+    from supportnode.node import node as node_module
+
+    decode = node_module.decode_any
+
+    def flaky(frames, limits):
+        msg = decode(frames, limits)
+        if msg.seq == 2:
+            raise RuntimeError("decoder bug")
+        return msg
+
+    monkeypatch.setattr(node_module, "decode_any", flaky)
+    pose = _sensor_pose(0, 0, 1.5)
+    pts = _platform(rng, 0, 0) - pose[:3, 3]
+    with _spinning("surfaces", False, detect_process=False) as (node, pub, sub):
+        for i in range(3):
+            pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+            time.sleep(0.3)
+        got = []
+        deadline = time.monotonic() + 10
+        while len(got) < 2 and time.monotonic() < deadline:
+            if (msg := sub.recv(0.1)) is not None:
+                got.append(msg.seq)
+        c, rejects = dict(node.counters), dict(node.rejects)
+    assert rejects == {"internal_error": 1} and c["scans_rejected"] == 1
+    assert c["scans_processed"] == 2 and len(got) == 2
+
+
 def test_busy_detector_waits_for_the_next_scan_as_long_as_its_merge_takes(rng, monkeypatch):
     """Scans every 0.2 s, each merged in 0.12 s (over half a period), detection 0.5 s: when
     the detector becomes free the newest scan has waited for it, and the next one is ready 0.32

@@ -709,7 +709,12 @@ class Node(Closing):
         that only usable scans take a place in the newest-scans queue (a malformed message
         after a scan must not push it out)."""
         t = time.perf_counter()
-        msg = self._decode(frames)
+        try:
+            msg = self._decode(frames)
+        except Exception as err:  # a decoder bug must not end the node's receiving loop
+            self.log.exception("scan message: internal error while decoding")
+            self._reject("internal_error", f"decoding: {type(err).__name__}: {err}")
+            return None
         return None if msg is None else _Decoded(msg, time.perf_counter() - t)
 
     def _decoded(self, frames: Any) -> tuple[PointCloud | None, float]:
