@@ -12,16 +12,14 @@ counting sort, per-voxel moments), on the node's map after the moving OS-128 seq
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_node import scene_by_name
-from common import table
+from common import median_time, table
 
 from supportnode.geometry.voxels import voxelize
 from supportnode.node.map import VoxelMap
@@ -99,16 +97,6 @@ def _compiled():
     return voxelize_nb
 
 
-def _median_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return 1e3 * statistics.median(times)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scans", type=int, default=40, help="moving OS-128 scans merged first")
@@ -132,8 +120,8 @@ def main() -> int:
     counts, order, sums, outer = voxelize_nb(pts, size)
     same = np.array_equal(counts, grid.counts) and np.array_equal(order, grid.order)
     err = max(np.abs(sums - grid.sums).max(), np.abs(outer - grid.outer).max())
-    t_np = _median_ms(lambda: voxelize(pts, size), args.repeats)
-    t_nb = _median_ms(lambda: voxelize_nb(pts, size), args.repeats)
+    t_np = 1e3 * median_time(lambda: voxelize(pts, size), args.repeats)
+    t_nb = 1e3 * median_time(lambda: voxelize_nb(pts, size), args.repeats)
     print(
         table(
             [
