@@ -12,20 +12,18 @@ counting sort, per-voxel moments), on the node's map after the moving OS-128 seq
 from __future__ import annotations
 
 import argparse
+import collections
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_node import scene_by_name
+from bench_node import moving_maps
 from common import median_time, table
 
 from supportnode.geometry.voxels import voxelize
-from supportnode.node.map import VoxelMap
 from supportnode.params import DetectParams
-from supportnode.sim import Lidar, poses_for
-from supportnode.sim.simulate import scans
 
 
 def _compiled():
@@ -109,11 +107,7 @@ def main() -> int:
     except ImportError:
         print("bench_compiled.py: needs numba (pip install numba)", file=sys.stderr)
         return 2
-    scene = scene_by_name("kitchen_closed")
-    poses = poses_for(scene, args.scans)
-    m = VoxelMap(DetectParams().node.map)
-    for i, s in enumerate(scans(scene, Lidar.preset("os128"), poses, seed=0, frame="sensor")):
-        m.integrate(s.points, s.sensor_pose, 0.1 * i)
+    _, m = collections.deque(moving_maps(args.scans), maxlen=1)[0]  # the last state
     pts = np.ascontiguousarray(m.points(), dtype=np.float64)
     size = np.asarray(DetectParams().surfaces.voxel_size, dtype=np.float64)
     grid = voxelize(pts, size)

@@ -66,6 +66,17 @@ def scene_by_name(name: str):
     return load_scene(name)
 
 
+def moving_maps(n_scans: int, scene_name: str = "kitchen_closed"):
+    """The node's map (default parameters) after each of ``n_scans`` moving OS-128 scans along
+    the scene's path, noise-free: yields (scan index, VoxelMap), the same map object updated."""
+    scene = scene_by_name(scene_name)
+    m = VoxelMap(DetectParams().node.map)
+    sc = scans(scene, Lidar.preset("os128"), poses_for(scene, n_scans), seed=0, frame="sensor")
+    for i, s in enumerate(sc):
+        m.integrate(s.points, s.sensor_pose, 0.1 * i)
+        yield i, m
+
+
 def _cloud(s, stamp: float, seq: int) -> PointCloud:
     return PointCloud.from_xyz(
         s.points, stamp, "lidar", seq=seq, pose=pose_from_matrix(s.sensor_pose)

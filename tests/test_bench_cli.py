@@ -92,3 +92,25 @@ def test_compiled_bench_without_numba_says_what_it_needs():
     assert proc.returncode == 2
     assert proc.stderr.strip() == "bench_compiled.py: needs numba (pip install numba)"
     assert proc.stdout == ""
+
+
+@pytest.mark.parametrize(
+    ("script", "args", "message"),
+    [
+        ("bench_compiled.py", ["--scans", "0"], "--scans and --repeats must be at least 1"),
+        ("bench_compiled.py", ["--repeats", "-2"], "--scans and --repeats must be at least 1"),
+        ("bench_locality.py", ["--from-scan", "59"], "--from-scan must be at least 0 and below"),
+        ("bench_locality.py", ["--margin", "nan"], "--margin: expected a finite number >= 0"),
+    ],
+)
+def test_other_bench_scripts_bad_flags_are_one_line_errors(script, args, message):
+    proc = subprocess.run(
+        [sys.executable, str(BENCH.parent / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"{script}: error: ") and message in last
+    assert "Traceback" not in proc.stderr and proc.stdout == ""

@@ -852,8 +852,9 @@ class Node(Closing):
                             f"{self.cfg.max_message_bytes}",
                         )
                 if frames is not None:
-                    # Received when decoding began: the subscriber decoded it off the socket.
-                    t_recv = time.perf_counter() - getattr(frames, "seconds", 0.0)
+                    # Received when decoding began: the subscriber's check decoded it (a
+                    # _Decoded) as it came off the socket.
+                    t_recv = time.perf_counter() - frames.seconds
                     if worker is not None:
                         self._ingest_for_detection(frames, t_recv)
                     else:
