@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -77,6 +77,7 @@ def detect(
     sensor_origin: np.ndarray | None = None,
     memo: Memo | None = None,
     on_surfaces: Callable[[SurfaceResult, list[FreeSpace], Segmentation], None] | None = None,
+    free_below: float | None = None,
 ) -> Detection:
     """Run the detection stages on (N, 3) float points, metres.
 
@@ -88,7 +89,9 @@ def detect(
     on_surfaces: called with the surfaces, their free space and the connected components of
     the points on no surface (a Segmentation) as soon as those are known, before touching
     objects are split and the objects described (hulls, boxes), so that a node can publish the
-    surfaces first; only when objects is true.
+    surfaces first; only when objects is true. free_below: free space only for the surfaces
+    lower than this height, metres, in the output frame (a node publishes no surface at or
+    above its sensor: the ceiling's free space would be work thrown away); None: all.
     """
     params = params or DetectParams()
     timings: dict[str, float] = {}
@@ -122,7 +125,12 @@ def detect(
         components = cluster_objects(pts, surfaces, params.objects)
         timings["objects"] = time.perf_counter() - t
         t = time.perf_counter()
-        free = free_space_all(surfaces, components.segmentation, pts, params.freespace)
+        below = surfaces
+        if free_below is not None:
+            below = replace(
+                surfaces, surfaces=[s for s in surfaces.surfaces if s.height < free_below]
+            )
+        free = free_space_all(below, components.segmentation, pts, params.freespace)
         timings["free_space"] = time.perf_counter() - t
         if on_surfaces is not None:
             on_surfaces(surfaces, free, components.segmentation)

@@ -168,6 +168,29 @@ def test_detect_reports_surfaces_before_describing_objects(rng):
     assert f[0].occupied_area > 0.09  # the box's footprint, before any hull was computed
 
 
+def test_detect_free_below_leaves_out_only_the_higher_surfaces():
+    """pipeline.detect(free_below=h): free space of the surfaces lower than h, exactly as a
+    detection of all gives it, and none for the others (a node's ceiling)."""
+    from supportnode.pipeline import detect
+
+    floor = plane(-1, 1, -1, 1, 0.0, step=0.02)
+    table = plane(1.5, 2.5, -0.5, 0.5, 0.8, step=0.02)
+    ceiling = plane(-1, 1, -1, 1, 2.4, step=0.02)
+    b = box((0.0, 0.0, 0.0), (0.3, 0.3, 0.4))
+    pts = np.concatenate([floor, table, ceiling, b])
+    every = detect(pts)
+    heights = sorted(round(s.height, 2) for s in every.surfaces.surfaces)
+    assert heights == [0.0, 0.4, 0.8, 2.4]  # 0.4: the box top
+    cut = detect(pts, free_below=1.0)
+    low = {s.id for s in every.surfaces.surfaces if s.height < 1.0}
+    assert {f.surface_id for f in cut.free_space} == low
+    want = [f.to_dict() for f in every.free_space if f.surface_id in low]
+    assert [f.to_dict() for f in cut.free_space] == want
+    assert [s.to_dict() for s in cut.surfaces.surfaces] == [
+        s.to_dict() for s in every.surfaces.surfaces
+    ]
+
+
 def test_free_space_does_not_depend_on_how_touching_objects_are_split():
     """A pile occupies its surface however it is split into objects: free space comes from the
     connected components standing on each surface. On the sloped scene the ramp (on the floor,

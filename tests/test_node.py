@@ -157,6 +157,52 @@ def test_unchanged_map_reuses_the_detection(rng):
         assert len(out.obstacles.clusters) == 1 and not outs[-1].obstacles.clusters
 
 
+def test_sensor_rising_above_a_board_publishes_its_free_space(rng):
+    """Boards at 0.5 m and 1.6 m; the sensor at 1.2 m publishes only the lower one (the higher
+    is an underside), and the detection leaves the higher one without free space. Once the
+    map is full and the detection reused, the sensor rises to 2 m over the same scene: the
+    higher board is published now, with its free space, so the reuse must not happen."""
+    scene = np.vstack([_platform(rng, 0, 0), _platform(rng, 3, 0, z=1.6)])
+    outs = []
+    with Node() as node:
+        for i, z in enumerate([1.2] * 4 + [2.0]):
+            pose = _sensor_pose(0, 0, z)
+            outs.append(node.process(_cloud(scene - pose[:3, 3], 1.0 + 0.1 * i, pose=pose)))
+        assert [round(s.height, 2) for s in outs[3].surfaces.surfaces] == [0.5]
+        got = {round(s.height, 2): s for s in outs[-1].surfaces.surfaces}
+        assert sorted(got) == [0.5, 1.6]
+        assert 0.9 < got[1.6].free_area <= got[1.6].area  # a 1.2 x 0.8 m board, nothing on it
+        assert outs[3].reused and not outs[-1].reused
+
+
+def test_regional_declines_when_surfaces_it_keeps_lack_free_space(rng):
+    """A previous detection with free space below 1 m only: a regional recompute that needs
+    it below 2 m cannot take the unchanged high board from it; below 1 m it can."""
+    params = DetectParams()
+    pts = np.vstack([_platform(rng, 0, 0), _platform(rng, 4, 0, z=1.6)])
+    previous = incremental.full(pts, params, free_below=1.0)
+    assert len(previous.surfaces) == 2 and len(previous.free) == 1
+    box = box_points(rng, (0.2, 0.1, 0.6), (0.2, 0.2, 0.2), 2000)
+    now = np.vstack([pts, box])
+    lo, hi = np.array([0.1, 0.0]), np.array([0.3, 0.2])
+    assert incremental.regional(now, previous, lo, hi, params, free_below=2.0) is None
+    got = incremental.regional(now, previous, lo, hi, params, free_below=1.0)
+    want = incremental.full(now, params, free_below=1.0)
+    assert got is not None and got.region is not None
+    assert sorted(round(s.height, 2) for s in got.surfaces) == [0.5, 1.6]
+
+    def free_by_height(items):  # ids are numbered differently by the two
+        height = {s.id: round(s.height, 2) for s in items.surfaces}
+        out = {}
+        for f in items.free:
+            d = f.to_dict()
+            d.pop("surface_id")
+            out[height[f.surface_id]] = d
+        return out
+
+    assert free_by_height(got) == free_by_height(want) and list(free_by_height(got)) == [0.5]
+
+
 def test_removed_object_leaves_the_map(rng):
     """A box on a board, then the board alone seen from the side: the rays through where the
     box stood clear it within a few scans, and its obstacle ids are reported gone. (The wall
@@ -564,8 +610,8 @@ def test_worker_lost_after_sending_surfaces_publishes_them_once(rng):
         def ready(self) -> bool:
             return True
 
-        def detect(self, points, stop, on_surfaces, on_sent=None):
-            on_surfaces(incremental.full(points, DetectParams()))
+        def detect(self, points, stop, on_surfaces, on_sent=None, free_below=None):
+            on_surfaces(incremental.full(points, DetectParams(), free_below=free_below))
             raise WorkerError("detection worker died (exit code -9)")
 
         def close(self) -> None:
@@ -620,7 +666,7 @@ class _InProcessWorker:
     def ready(self):
         return True
 
-    def detect(self, points, stop, on_surfaces, on_sent=None):
+    def detect(self, points, stop, on_surfaces, on_sent=None, free_below=None):
         sent = np.array(points, copy=True)
         pending = self.node.map.clear_pending
         if self.between is not None:
@@ -628,7 +674,9 @@ class _InProcessWorker:
         if on_sent is not None:
             on_sent()
         after_sent = self.node.map.clear_pending
-        items = incremental.full(sent, DetectParams(), on_surfaces=on_surfaces)
+        items = incremental.full(
+            sent, DetectParams(), on_surfaces=on_surfaces, free_below=free_below
+        )
         self.log.append((pending, after_sent, self.node.map.clear_pending))
         return items
 

@@ -20,6 +20,7 @@ Everything here is in the node's detection frame (map frame rotated to gravity).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -51,6 +52,8 @@ class Items:
     cluster_points: list[np.ndarray] = field(default_factory=list)  # (M, 3) float32 each
     timings: dict[str, float] = field(default_factory=dict)
     region: tuple[np.ndarray, np.ndarray] | None = None  # x, y box recomputed; None: all
+    # Every surface lower than this (m) has its free space in ``free`` (higher ones may not).
+    free_below: float = math.inf
 
 
 def _box(item: Surface | Cluster) -> tuple[np.ndarray, np.ndarray]:
@@ -68,14 +71,18 @@ def _from_detection(
     origin: np.ndarray | None,
     memo: Memo | None = None,
     on_surfaces: Callable[[Items], None] | None = None,
+    free_below: float | None = None,
 ) -> Items:
+    below = math.inf if free_below is None else float(free_below)
     early = None
     if on_surfaces is not None:
 
         def early(surfaces: SurfaceResult, free: list[FreeSpace], _: object) -> None:
-            on_surfaces(Items(surfaces=list(surfaces.surfaces), free=list(free)))
+            on_surfaces(Items(surfaces=list(surfaces.surfaces), free=list(free), free_below=below))
 
-    d = detect(points, params, sensor_origin=origin, memo=memo, on_surfaces=early)
+    d = detect(
+        points, params, sensor_origin=origin, memo=memo, on_surfaces=early, free_below=free_below
+    )
     clusters = d.objects.clusters if d.objects is not None else []
     labels = d.objects.labels if d.objects is not None else np.zeros(0, np.int32)
     return Items(
@@ -84,6 +91,7 @@ def _from_detection(
         free=list(d.free_space),
         cluster_points=_cluster_points(points, labels, len(clusters)),
         timings=dict(d.timings),
+        free_below=below,
     )
 
 
@@ -109,12 +117,14 @@ def full(
     origin: np.ndarray | None = None,
     memo: Memo | None = None,
     on_surfaces: Callable[[Items], None] | None = None,
+    free_below: float | None = None,
 ) -> Items:
     """Detection on all of ``points`` (N, 3), metres, z up; memo: per-item results of the
     previous detections (the same result, sooner). on_surfaces: called, before the objects
     are described, with Items holding only the surfaces and their free space (the same as
-    the result's)."""
-    return _from_detection(points, params, origin, memo, on_surfaces)
+    the result's). free_below: free space only for surfaces lower than this, metres (None:
+    all; see `pipeline.detect`)."""
+    return _from_detection(points, params, origin, memo, on_surfaces, free_below)
 
 
 def regional(
@@ -125,16 +135,18 @@ def regional(
     params: DetectParams,
     origin: np.ndarray | None = None,
     margin: float = 0.5,
+    free_below: float | None = None,
 ) -> Items | None:
-    """Detection equal to ``full(points)`` when only the x, y box [lo, hi] (2,) changed since
-    ``previous`` was computed on the map; None when that cannot be guaranteed cheaply."""
+    """Detection equal to ``full(points, free_below=free_below)`` when only the x, y box
+    [lo, hi] (2,) changed since ``previous`` was computed on the map; None when that cannot
+    be guaranteed cheaply."""
 
     def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
         xy = points[:, :2]
         in_crop = np.all((xy >= blo) & (xy <= bhi), axis=1)
         return None if in_crop.sum() >= max_share * len(points) else points[in_crop]
 
-    return regional_from(fetch, previous, lo, hi, params, origin, margin)
+    return regional_from(fetch, previous, lo, hi, params, origin, margin, free_below)
 
 
 def regional_from(
@@ -145,12 +157,16 @@ def regional_from(
     params: DetectParams,
     origin: np.ndarray | None = None,
     margin: float = 0.5,
+    free_below: float | None = None,
 ) -> Items | None:
     """`regional` on a map that hands out crops: ``fetch(box_lo, box_hi, max_share)`` returns
     the (P, 3) detection-frame points whose x, y lie in the box, or None when they would be at
     least ``max_share`` of the map (then a full recompute is cheaper). The node fetches from
     its voxel map, so the cost of a scan does not grow with the parts of the map it did not
     touch."""
+    below = math.inf if free_below is None else float(free_below)
+    if below > previous.free_below:
+        return None  # unchanged surfaces that now need their free space lack it
     lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
         return None
@@ -167,7 +183,7 @@ def regional_from(
     crop = fetch(lo - 2 * margin, hi + 2 * margin, _MAX_CROP_SHARE)
     if crop is None:
         return None
-    new = _from_detection(crop, params, origin)
+    new = _from_detection(crop, params, origin, free_below=free_below)
     # New items meeting the region must lie within region + margin; items entirely in the
     # context band are pieces of unchanged items, which `previous` holds whole.
     keep_s = []
@@ -190,7 +206,7 @@ def regional_from(
     old_s = [s for i, s in enumerate(previous.surfaces) if not inside[i]]
     old_c = [j for j in range(len(previous.clusters)) if not inside[n_prev_s + j]]
     # A kept cluster stands on a kept surface: its surface met the region only if it did.
-    out = Items(timings=new.timings, region=(lo, hi))
+    out = Items(timings=new.timings, region=(lo, hi), free_below=below)
     sid_old = {s.id: k for k, s in enumerate(old_s)}
     sid_new = {s.id: len(old_s) + k for k, s in enumerate(keep_s)}
     out.surfaces = [dataclasses.replace(s, id=k) for k, s in enumerate(old_s + keep_s)]

@@ -84,6 +84,9 @@ SAFE_MIN_AREA = 0.10  # m^2
 SAFE_MAX_FLATNESS = 0.01  # m
 SAFE_MAX_TILT_DEG = 5.0
 SAFE_MIN_HITS = 2
+# Horizontal planes less than this below the sensor, or above it, are ceilings and
+# undersides, not supports: the node publishes only surfaces lower than sensor z minus this, m.
+_UNDER_SENSOR_M = 0.05
 # Gravity estimation without an IMU: every scan at first, then every this many scans.
 _GRAVITY_WARMUP = 5
 _GRAVITY_EVERY = 10
@@ -488,11 +491,16 @@ class Node(Closing):
             fetch_time[0] += time.perf_counter() - t
             return pts
 
+        sensor_z = float((rotation @ job.pose[:3, 3])[2])
+        # Surfaces from here up are not published (see _surface_message): no free space.
+        below = sensor_z - _UNDER_SENSOR_M
         # Detection is a function of the map's points alone: on an unchanged map (a robot
-        # standing before a static scene) the previous one is the answer.
+        # standing before a static scene) the previous one is the answer, unless the sensor
+        # rose and surfaces that it left without free space are now below it.
         reused = (
             same_frame
             and self._items is not None
+            and self._items.free_below >= below
             and source[1] is not None
             and self._items_source[0] is source[0]
             and self._items_source[1] == source[1]
@@ -500,9 +508,10 @@ class Node(Closing):
         if reused:
             items = self._items
         elif self.incremental and self._items is not None and same_frame:
-            items = incremental.regional_from(fetch, self._items, lo, hi, self.params)
+            items = incremental.regional_from(
+                fetch, self._items, lo, hi, self.params, free_below=below
+            )
         is_incremental = items is not None and not reused
-        sensor_z = float((rotation @ job.pose[:3, 3])[2])
         early: list[_SurfaceOut] = []
         if items is None:
             t = time.perf_counter()
@@ -533,7 +542,7 @@ class Node(Closing):
                     # detection, not before the next merge.
                     self._finish_map_safely(job.merge, wait=False)
 
-            items = self._full(points, on_surfaces, after_send)
+            items = self._full(points, on_surfaces, after_send, below)
             if items is None:
                 return None  # stopped while the worker was detecting
         if not reused:
@@ -564,10 +573,11 @@ class Node(Closing):
         points: np.ndarray,
         on_surfaces: Callable[[Items], None] | None = None,
         after_send: Callable[[], None] | None = None,
+        free_below: float | None = None,
     ) -> Items | None:
         """Full detection on (N, 3) detection-frame points: in the worker process when it
         is up, else in this thread. None when the node stopped during the detection.
-        on_surfaces: see `incremental.full`. after_send: called once the worker has the
+        on_surfaces, free_below: see `incremental.full`. after_send: called once the worker has the
         points, while it detects (`DetectionWorker.detect`'s on_sent); not called when the
         detection runs in this thread."""
         self._start_worker_when_due()
@@ -577,7 +587,9 @@ class Node(Closing):
                 if self._worker_logged != w.pid:
                     self._worker_logged = w.pid
                     self.log.info("detection worker ready (pid %d)", w.pid)
-                items = w.detect(points, self._stop, on_surfaces, on_sent=after_send)
+                items = w.detect(
+                    points, self._stop, on_surfaces, on_sent=after_send, free_below=free_below
+                )
                 self.counters["worker_detections"] += 1
                 return items
         except WorkerError as err:
@@ -594,7 +606,9 @@ class Node(Closing):
             )
             if again:
                 self._worker_restart_at = time.monotonic() + _WORKER_RESTART_S
-        return incremental.full(points, self.params, memo=self._memo, on_surfaces=on_surfaces)
+        return incremental.full(
+            points, self.params, memo=self._memo, on_surfaces=on_surfaces, free_below=free_below
+        )
 
     def _start_worker_when_due(self) -> None:
         due = self._worker_restart_at
@@ -614,7 +628,7 @@ class Node(Closing):
         are not needed: free space is in ``items.free``). Call with the track lock held."""
         t = time.perf_counter()
         # Horizontal planes above the sensor are ceilings and undersides, not supports.
-        keep = [s for s in items.surfaces if s.height < sensor_z - 0.05]
+        keep = [s for s in items.surfaces if s.height < sensor_z - _UNDER_SENSOR_M]
         kept_ids = {s.id for s in keep}
         s_up = self.surface_tracker.update_surfaces(keep)
         sid = {s.id: int(i) for s, i in zip(keep, s_up.ids, strict=True)}

@@ -18,8 +18,8 @@ stopping the node, signals the whole process group, and the parent decides when 
 stops (a worker dying first would look like a crash to the node).
 
 Wire: a socket pair wrapped in `multiprocessing.connection.Connection` (framed messages).
-Parent to worker: `DetectParams`, then per detection a header (shape, dtype, surfaces first)
-and the raw point bytes. Worker to parent: ``("ready", pid)`` once, then per detection
+Parent to worker: `DetectParams`, then per detection a header (shape, dtype, surfaces first,
+free below) and the raw point bytes. Worker to parent: ``("ready", pid)`` once, then per detection
 ``("surfaces", items)`` when asked for surfaces first (Items with the surfaces and their free
 space only), then ``("ok", items, seconds)`` or ``("error", text)``.
 """
@@ -107,9 +107,10 @@ class DetectionWorker:
         stop: threading.Event | None = None,
         on_surfaces: Callable[[Items], None] | None = None,
         on_sent: Callable[[], None] | None = None,
+        free_below: float | None = None,
     ) -> Items:
-        """`incremental.full` of (N, 3) points in the worker (on_surfaces as there, called
-        in this thread); raises WorkerError when the worker is gone or ``stop`` is set while
+        """`incremental.full` of (N, 3) points in the worker (on_surfaces and free_below as
+        there, on_surfaces called in this thread); raises WorkerError when the worker is gone or ``stop`` is set while
         waiting, RuntimeError for an error in the detection itself (the worker goes on).
         on_sent: called in this thread once the points are sent, while the worker detects
         (the caller's own work beside the detection; ``points`` may change from then on);
@@ -120,7 +121,7 @@ class DetectionWorker:
         pts = np.ascontiguousarray(points)
         t0 = time.perf_counter()
         try:
-            self._conn.send((pts.shape, pts.dtype.str, on_surfaces is not None))
+            self._conn.send((pts.shape, pts.dtype.str, on_surfaces is not None, free_below))
             self._conn.send_bytes(pts)
             if on_sent is not None:
                 try:
@@ -199,7 +200,7 @@ def _serve(conn: Connection) -> int:
     conn.send(("ready", os.getpid()))
     while True:
         try:
-            shape, dtype, surfaces_first = conn.recv()
+            shape, dtype, surfaces_first, free_below = conn.recv()
             points = np.empty(shape, np.dtype(dtype))
             conn.recv_bytes_into(points.reshape(-1))  # 1-D: the buffer's length is its size
         except (EOFError, OSError):
@@ -207,7 +208,9 @@ def _serve(conn: Connection) -> int:
         t = time.perf_counter()
         try:
             early = (lambda part: conn.send(("surfaces", part))) if surfaces_first else None
-            items = incremental.full(points, params, memo=memo, on_surfaces=early)
+            items = incremental.full(
+                points, params, memo=memo, on_surfaces=early, free_below=free_below
+            )
         except Exception as err:  # reported to the parent, which logs and counts it
             traceback.print_exc()
             conn.send(("error", f"{type(err).__name__}: {err}"))
