@@ -60,6 +60,8 @@ _KEYS = (
     "required",
     "delay",
 )
+# Longest the supervisor sleeps between looks at signals (see _supervise), s.
+_WAKE_S = 0.25
 _STR = "tag:yaml.org,2002:str"
 _BOOL = "tag:yaml.org,2002:bool"
 _INT = "tag:yaml.org,2002:int"
@@ -396,7 +398,10 @@ class Launcher:
             if not schedule and not self._running:
                 self.log("every process has exited")
                 return 1 if failed else 0
-            timeout = max(0.0, schedule[0][0] - now) if schedule else None
+            # Never an unbounded wait: a SIGINT or SIGTERM that the kernel hands to one of the
+            # reader threads only sets a flag, and its handler runs in this (main) thread once
+            # it next wakes; a wait without end would never see it.
+            timeout = min(max(0.0, schedule[0][0] - now), _WAKE_S) if schedule else _WAKE_S
             try:
                 kind, payload = self._events.get(timeout=timeout)
             except queue.Empty:
