@@ -6,12 +6,14 @@ dataclasses out, no files or printing.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from supportnode.errors import InputError
 from supportnode.geometry.freespace import FreeSpace, free_space_all
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects import (
@@ -94,6 +96,9 @@ def detect(
     above its sensor: the ceiling's free space would be work thrown away); None: all.
     """
     params = params or DetectParams()
+    if free_below is not None and math.isnan(free_below):
+        # Every comparison with NaN is false: the result would hold no free space at all.
+        raise InputError("free_below must be a height in metres or None, got nan")
     timings: dict[str, float] = {}
     pts = np.asarray(points, dtype=np.float64)
     rotation = None

@@ -10,6 +10,7 @@ import pytest
 from conftest import REPO
 from test_objects import box, make_surface, plane
 
+from supportnode.errors import InputError
 from supportnode.geometry.freespace import free_space, free_space_all
 from supportnode.geometry.objects import detect_objects
 from supportnode.geometry.surfaces import SurfaceResult
@@ -189,6 +190,8 @@ def test_detect_free_below_leaves_out_only_the_higher_surfaces():
     assert [s.to_dict() for s in cut.surfaces.surfaces] == [
         s.to_dict() for s in every.surfaces.surfaces
     ]
+    with pytest.raises(InputError, match="free_below must be a height in metres or None, got nan"):
+        detect(pts, free_below=float("nan"))
 
 
 def test_free_space_does_not_depend_on_how_touching_objects_are_split():

@@ -20,7 +20,6 @@ Everything here is in the node's detection frame (map frame rotated to gravity).
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -52,8 +51,12 @@ class Items:
     cluster_points: list[np.ndarray] = field(default_factory=list)  # (M, 3) float32 each
     timings: dict[str, float] = field(default_factory=dict)
     region: tuple[np.ndarray, np.ndarray] | None = None  # x, y box recomputed; None: all
-    # Every surface lower than this (m) has its free space in ``free`` (higher ones may not).
-    free_below: float = math.inf
+
+    def has_free_space_below(self, height: float | None) -> bool:
+        """Does every surface lower than ``height`` (m; None: every surface) have its free
+        space in ``free``? (A detection with ``free_below`` leaves the higher ones out.)"""
+        have = {f.surface_id for f in self.free}
+        return all(s.id in have for s in self.surfaces if height is None or s.height < height)
 
 
 def _box(item: Surface | Cluster) -> tuple[np.ndarray, np.ndarray]:
@@ -73,12 +76,11 @@ def _from_detection(
     on_surfaces: Callable[[Items], None] | None = None,
     free_below: float | None = None,
 ) -> Items:
-    below = math.inf if free_below is None else float(free_below)
     early = None
     if on_surfaces is not None:
 
         def early(surfaces: SurfaceResult, free: list[FreeSpace], _: object) -> None:
-            on_surfaces(Items(surfaces=list(surfaces.surfaces), free=list(free), free_below=below))
+            on_surfaces(Items(surfaces=list(surfaces.surfaces), free=list(free)))
 
     d = detect(
         points, params, sensor_origin=origin, memo=memo, on_surfaces=early, free_below=free_below
@@ -91,7 +93,6 @@ def _from_detection(
         free=list(d.free_space),
         cluster_points=_cluster_points(points, labels, len(clusters)),
         timings=dict(d.timings),
-        free_below=below,
     )
 
 
@@ -164,8 +165,7 @@ def regional_from(
     least ``max_share`` of the map (then a full recompute is cheaper). The node fetches from
     its voxel map, so the cost of a scan does not grow with the parts of the map it did not
     touch."""
-    below = math.inf if free_below is None else float(free_below)
-    if below > previous.free_below:
+    if not previous.has_free_space_below(free_below):
         return None  # unchanged surfaces that now need their free space lack it
     lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
@@ -206,7 +206,7 @@ def regional_from(
     old_s = [s for i, s in enumerate(previous.surfaces) if not inside[i]]
     old_c = [j for j in range(len(previous.clusters)) if not inside[n_prev_s + j]]
     # A kept cluster stands on a kept surface: its surface met the region only if it did.
-    out = Items(timings=new.timings, region=(lo, hi), free_below=below)
+    out = Items(timings=new.timings, region=(lo, hi))
     sid_old = {s.id: k for k, s in enumerate(old_s)}
     sid_new = {s.id: len(old_s) + k for k, s in enumerate(keep_s)}
     out.surfaces = [dataclasses.replace(s, id=k) for k, s in enumerate(old_s + keep_s)]

@@ -500,7 +500,7 @@ class Node(Closing):
         reused = (
             same_frame
             and self._items is not None
-            and self._items.free_below >= below
+            and self._items.has_free_space_below(below)
             and source[1] is not None
             and self._items_source[0] is source[0]
             and self._items_source[1] == source[1]
