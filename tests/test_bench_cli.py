@@ -77,23 +77,6 @@ def test_ab_bad_arguments_are_one_line_errors(args, message):
     assert "Traceback" not in proc.stderr
 
 
-def test_compiled_bench_without_numba_says_what_it_needs():
-    """bench_compiled.py is evidence, not a dependency: without numba it says so in one line."""
-    import importlib.util
-
-    if importlib.util.find_spec("numba") is not None:
-        pytest.skip("numba is installed here")
-    proc = subprocess.run(
-        [sys.executable, str(BENCH.parent / "bench_compiled.py")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 2
-    assert proc.stderr.strip() == "bench_compiled.py: needs numba (pip install numba)"
-    assert proc.stdout == ""
-
-
 @pytest.mark.parametrize(
     ("script", "args", "message"),
     [

@@ -1,0 +1,16 @@
+"""Compiled loops: numba ``@njit(cache=True)`` kernels, numpy arrays in, numpy arrays out.
+
+Floor 0 of the package: nothing here imports from the rest of supportnode, and nothing above
+sees a numba type. Each module holds the kernels of one job (voxel store, region growing,
+connected components, ray clearing, rasters, LZF) behind plain typed Python functions that
+check their inputs (shape, dtype, finite values) before the compiled code runs.
+
+Conventions:
+- ``@njit(cache=True)`` always, so the compile cost is paid once per machine (numba writes the
+  cache beside the source, or under ``NUMBA_CACHE_DIR`` / the user cache when that is read-only).
+- A module that adds kernels registers a small warm-up with :func:`runtime.warmer`; the node
+  calls :func:`runtime.warm` before it subscribes, so its first scan is not slow.
+- ``parallel=True`` / ``prange`` only where measured to pay on two cores; the threading layer
+  and thread count are set once by :func:`runtime.configure` (``node.threads``).
+- This package's ``__init__`` imports nothing: ``import supportnode.client`` must not load numba.
+"""
