@@ -21,7 +21,17 @@ class SceneError(SupportNodeError):
 
 
 class ProtocolError(SupportNodeError):
-    """A wire message cannot be decoded or fails validation."""
+    """A wire message cannot be decoded or fails validation.
+
+    reason: the short reject reason a receiver counts it under (``malformed``, ``version``,
+    ``nonfinite``, ``bad_gravity``, ...: docs/protocol.md section 9)."""
+
+    def __init__(self, message: str, reason: str = "malformed") -> None:
+        super().__init__(message)
+        self.reason = reason
+
+    def __reduce__(self):  # keeps the reason through pickling (the detection worker)
+        return (type(self), (str(self), self.reason))
 
 
 class AlignmentError(SupportNodeError):

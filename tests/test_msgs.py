@@ -566,7 +566,10 @@ POSE_CASES = [
     ),
     ({"pose": {"rotation": [0, 0, 0, 1]}}, "pose has no key 'translation'"),
     ({"pose": [1, 2, 3]}, "header key 'pose' must be a map"),
-    ({"gravity": [0, 0, 0]}, "gravity is the zero vector"),
+    ({"gravity": [0, 0, 0]}, "has magnitude 0, not in [0.001, 1000]"),
+    ({"gravity": [1e308, 1e308, -1e308]}, "has magnitude 1.73205e+308, not in [0.001, 1000]"),
+    ({"gravity": [0, 0, -1e-320]}, "has magnitude 9.99989e-321, not in [0.001, 1000]"),
+    ({"gravity": [0, 0, -2e3]}, "has magnitude 2000, not in [0.001, 1000]"),
     ({"gravity": [0, 0, math.nan]}, "gravity[2] is nan"),
     ({"gravity": "down"}, "gravity must be a list of 3 numbers, got str"),
     ({"imu_orientation": [0, 0, 0, 0.5]}, "imu_orientation has norm 0.5"),
@@ -577,6 +580,28 @@ POSE_CASES = [
 @pytest.mark.parametrize(("keys", "needle"), POSE_CASES)
 def test_bad_pose_gravity_imu(keys, needle):
     rejects(reheader(pc_frames(), lambda h: h.update(keys)), needle)
+
+
+def test_reject_reasons_are_structured():
+    """Every ProtocolError carries the reason a receiver counts it under."""
+    cases = {
+        "bad_gravity": reheader(pc_frames(), lambda h: h.update(gravity=[1e308, 1e308, -1e308])),
+        "nonfinite": reheader(pc_frames(), lambda h: h.update(stamp=math.inf)),
+        "version": reheader(pc_frames(), lambda h: h.update(version=7)),
+        "malformed": [b"scan", b"\xc1"],
+    }
+    for reason, frames in cases.items():
+        with pytest.raises(ProtocolError) as info:
+            decode_any(frames)
+        assert info.value.reason == reason, str(info.value)
+    big = wire(PointCloud(0.0, "f", {k: np.zeros(30, np.float32) for k in "xyz"}).encode(TOPIC))
+    with pytest.raises(ProtocolError) as info:
+        decode_any(big, Limits(max_points=10))
+    assert info.value.reason == "too_many_points"
+    # good gravities of any unit pass: m/s^2, g, a unit vector
+    for g in ([0, 0, -9.81], [0, 0, -1.0], [0.001, 0, 0]):
+        out = decode_any(reheader(pc_frames(), lambda h, g=g: h.update(gravity=g)))
+        np.testing.assert_array_equal(out.gravity, g)
 
 
 def test_bad_topic_and_frames():

@@ -109,8 +109,9 @@ class Check:
         self.topic = topic
         self.prefix = prefix  # "cannot encode: " when checking a message before sending it
 
-    def fail(self, problem: str) -> NoReturn:
-        raise ProtocolError(f"topic {self.topic!r}: {self.prefix}{problem}")
+    def fail(self, problem: str, reason: str = "malformed") -> NoReturn:
+        """Raise the ProtocolError; ``reason``: what a receiver counts it under."""
+        raise ProtocolError(f"topic {self.topic!r}: {self.prefix}{problem}", reason)
 
     def key(self, m: Mapping[str, Any], key: str, path: str = "header") -> Any:
         """``m[key]``, or a failure naming the missing key."""
@@ -147,7 +148,7 @@ class Check:
         except OverflowError:  # a msgpack uint64 cannot overflow, but be safe
             self.fail(f"{what} is out of range")
         if not math.isfinite(x):
-            self.fail(f"{what} is {x} (must be finite)")
+            self.fail(f"{what} is {x} (must be finite)", "nonfinite")
         if x < lo:
             self.fail(f"{what} = {x} must be >= {lo}")
         return x
@@ -193,7 +194,7 @@ class Check:
         if a.dtype.kind == "f":
             bad = int(np.count_nonzero(~np.isfinite(a)))
             if bad:
-                self.fail(f"{bad} NaN/Inf values in {name}")
+                self.fail(f"{bad} NaN/Inf values in {name}", "nonfinite")
 
     def offsets(self, a: np.ndarray, name: str, items: int, total: int) -> None:
         """CSR offsets: (items + 1,) from 0 to ``total``, non-decreasing."""
@@ -269,7 +270,10 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
     chk = Check(topic)
     total = sum(v.nbytes for v in views)
     if total > limits.max_message_bytes:
-        chk.fail(f"message has {total} bytes, exceeds max_message_bytes {limits.max_message_bytes}")
+        chk.fail(
+            f"message has {total} bytes, exceeds max_message_bytes {limits.max_message_bytes}",
+            "oversized",
+        )
     if len(views) - 2 > limits.max_buffers:
         chk.fail(f"{len(views) - 2} buffer frames exceed max_buffers {limits.max_buffers}")
     hb = views[1]
@@ -300,7 +304,9 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
     type_name = chk.as_str(chk.key(header, "type"), "header key 'type'")
     version = chk.as_int(chk.key(header, "version"), "header key 'version'")
     if version != SCHEMA_VERSION:
-        chk.fail(f"unsupported schema version {version} (this node speaks {SCHEMA_VERSION})")
+        chk.fail(
+            f"unsupported schema version {version} (this node speaks {SCHEMA_VERSION})", "version"
+        )
     if type_name not in MESSAGE_TYPE_NAMES:
         chk.fail(f"unknown message type {short(type_name)}")
     stamp = chk.as_float(chk.key(header, "stamp"), "header key 'stamp'")

@@ -23,6 +23,8 @@ __all__ = ["PointCloud", "Pose"]
 XYZ = ("x", "y", "z")
 # Per-point vector fields (e.g. rgb as (N, 3) uint8) may have at most this many columns.
 MAX_FIELD_COLUMNS = 64
+#: Magnitudes a ``gravity`` vector may have (any unit: only its direction is used).
+GRAVITY_NORM = (1e-3, 1e3)
 
 
 @dataclass(eq=False)
@@ -170,7 +172,7 @@ class PointCloud:
         x = chk.array(buffers, "x", FLOAT_DTYPES)
         n = len(x)
         if n > limits.max_points:
-            chk.fail(f"{n} points exceeds max_points {limits.max_points}")
+            chk.fail(f"{n} points exceeds max_points {limits.max_points}", "too_many_points")
         cols: dict[str, np.ndarray] = {}
         for name in XYZ:
             cols[name] = chk.array(buffers, name, FLOAT_DTYPES)
@@ -195,9 +197,7 @@ class PointCloud:
             )
         gravity = None
         if raw.get("gravity") is not None:
-            gravity = chk.as_vector(raw["gravity"], "gravity", 3)
-            if not np.any(gravity):
-                chk.fail("gravity is the zero vector")
+            gravity = _gravity(chk, chk.as_vector(raw["gravity"], "gravity", 3))
         imu = None
         if raw.get("imu_orientation") is not None:
             imu = chk.unit_quaternion(raw["imu_orientation"], "imu_orientation")
@@ -206,7 +206,7 @@ class PointCloud:
         if dropped:
             if not drop_nonfinite:
                 bad = sum(int(np.count_nonzero(~np.isfinite(cols[k]))) for k in XYZ)
-                chk.fail(f"{bad} NaN/Inf values in x,y,z")
+                chk.fail(f"{bad} NaN/Inf values in x,y,z", "nonfinite")
             cols = {k: v[good] for k, v in cols.items()}
         return cls(
             stamp=header.stamp,
@@ -218,6 +218,20 @@ class PointCloud:
             imu_orientation=imu,
             dropped_nonfinite=dropped,
         )
+
+
+def _gravity(chk: Check, g: np.ndarray) -> np.ndarray:
+    """``g`` when it has a direction: a magnitude within `GRAVITY_NORM` (m/s^2, g or a unit
+    vector all qualify), so that normalising it is exact; else a ``bad_gravity`` failure.
+    (1e308 components overflow the norm, 1e-320 ones underflow it: both normalise to NaN.)"""
+    scale = float(np.max(np.abs(g)))
+    norm = scale * float(np.linalg.norm(g / scale)) if scale > 0 else 0.0
+    lo, hi = GRAVITY_NORM
+    if not lo <= norm <= hi:
+        chk.fail(
+            f"gravity {g.tolist()} has magnitude {norm:.6g}, not in [{lo:g}, {hi:g}]", "bad_gravity"
+        )
+    return g
 
 
 def _floats(chk: Check, v: Any, what: str, n: int) -> list[float]:

@@ -450,7 +450,10 @@ def _check_clusters(
     if has[0]:
         pts = chk.array(buffers, "points", FLOAT_DTYPES, (3,))
         if limits is not None and len(pts) > limits.max_points:
-            chk.fail(f"{len(pts)} cluster points exceeds max_points {limits.max_points}")
+            chk.fail(
+                f"{len(pts)} cluster points exceeds max_points {limits.max_points}",
+                "too_many_points",
+            )
         off = chk.array(buffers, "point_offsets", frozenset({"<i8"}))
         chk.offsets(off, "point_offsets", len(c["id"]), len(pts))
         chk.finite(pts, "points")
