@@ -28,6 +28,13 @@ domain). The connecting socket is the client: its own key pair plus the server's
 Key pairs are made by ``supportnode keys DIR --name NAME`` (``NAME.key`` public,
 ``NAME.key_secret`` both). A peer without CURVE, or with a key not authorised, never completes
 the handshake, so it neither receives nor delivers anything.
+
+Failed handshakes (optional): ``watch=report`` watches the socket's ZeroMQ monitor
+(`supportnode.handshake`): each failure is counted in ``handshake_failures()`` by kind and
+reported through ``report`` (one line, once per peer host and kind, naming the peer); a
+connecting socket whose session libzmq ended after a mechanism mismatch or a refused key is
+reconnected (in `Subscriber.recv` / `Publisher.send`, its owner's thread), so that the right
+peer is heard again once it is there.
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ import zmq
 
 from supportnode._closing import Closing
 from supportnode.errors import SupportNodeError
+from supportnode.handshake import HandshakeWatch
 
 __all__ = ["BusError", "CurveKeys", "Frames", "Publisher", "Subscriber", "check_endpoint"]
 
@@ -218,6 +226,30 @@ class _Socket(Closing):
         self.socket.setsockopt(zmq.LINGER, 0)
         self.endpoint = ""
         self._zap_domain = ""  # set while this socket is a CURVE server
+        self._watch: HandshakeWatch | None = None
+
+    def _attach(self, endpoint: str, bind: bool, watch: Callable[[str], None] | None) -> None:
+        """Bind or connect, then watch the handshakes when asked (`supportnode.handshake`)."""
+        self.endpoint = _attach(self.socket, endpoint, bind)
+        if watch is not None:
+            kind = "subscriber" if self.socket.type == zmq.SUB else "publisher"
+            self._watch = HandshakeWatch(
+                self.socket, self.endpoint, name=kind, connects=not bind, report=watch
+            )
+
+    def handshake_failures(self) -> dict[str, int]:
+        """Failed handshakes by kind (`supportnode.handshake.KINDS`); empty when not watched."""
+        return self._watch.failures() if self._watch is not None else {}
+
+    def _reconnect_if_due(self) -> None:
+        """A new session to the endpoint after a failed handshake ended the last one."""
+        if self._watch is None or not self._watch.reconnect_due():
+            return
+        try:
+            self.socket.disconnect(self.endpoint)
+        except zmq.ZMQError:
+            pass  # libzmq forgot the endpoint with its session: connecting is what counts
+        self.socket.connect(self.endpoint)
 
     def _setup_curve(self, curve: CurveKeys | None, bind: bool) -> None:
         """Configure CURVE before bind/connect: server if binding, else client."""
@@ -249,6 +281,11 @@ class _Socket(Closing):
 
     def close(self) -> None:
         """Close the socket now, discarding anything unsent (idempotent)."""
+        if self._watch is not None:
+            if not self.socket.closed:
+                self.socket.disable_monitor()
+            self._watch.close()
+            self._watch = None
         if not self.socket.closed:
             self.socket.close(linger=0)
         if self._zap_domain:
@@ -270,6 +307,7 @@ class Publisher(_Socket):
     ``hwm`` messages queue per subscriber before newer ones are dropped for that subscriber
     (a publisher never blocks on a slow consumer). ``endpoint`` holds the resolved address.
     ``curve``: optional CURVE keys (server when binding, client when connecting).
+    ``watch``: report failed handshakes through it (see the module docstring).
     ``check``: called with each message of our topics within the size limit as it comes off
     the socket; it returns what to keep in the message's place (what `recv` then returns), or
     None to refuse the message (counted in ``refused``; the check reports why). Refused messages
@@ -285,12 +323,13 @@ class Publisher(_Socket):
         *,
         hwm: int = 100,
         curve: CurveKeys | None = None,
+        watch: Callable[[str], None] | None = None,
     ) -> None:
         super().__init__(zmq.PUB, context)
         try:
             self.socket.setsockopt(zmq.SNDHWM, hwm)
             self._setup_curve(curve, bind)
-            self.endpoint = _attach(self.socket, endpoint, bind)
+            self._attach(endpoint, bind, watch)
         except BaseException:
             self._fail_init()
             raise
@@ -303,6 +342,7 @@ class Publisher(_Socket):
         not modify them afterwards (numpy arrays: send a copy if you will reuse the array)."""
         if not frames:
             raise ValueError("a message needs at least a topic frame")
+        self._reconnect_if_due()
         self.socket.send_multipart(list(frames), copy=False)
 
 
@@ -321,6 +361,7 @@ class Subscriber(_Socket):
     keep_newest + 4). It bounds the memory of unread scans; messages held back wait in the
     publisher's queue (its ``hwm``), which is why sensor publishers keep that small too.
     ``curve``: optional CURVE keys (server when binding, client when connecting).
+    ``watch``: report failed handshakes through it (see the module docstring).
     """
 
     def __init__(
@@ -335,6 +376,7 @@ class Subscriber(_Socket):
         rcvhwm: int | None = None,
         curve: CurveKeys | None = None,
         check: Callable[[Frames], Any] | None = None,
+        watch: Callable[[str], None] | None = None,
     ) -> None:
         if keep_newest < 1:
             raise ValueError(f"keep_newest must be at least 1, got {keep_newest}")
@@ -362,7 +404,7 @@ class Subscriber(_Socket):
             for topic in sorted(self.topics):
                 self.socket.setsockopt(zmq.SUBSCRIBE, topic)
             self._setup_curve(curve, bind)
-            self.endpoint = _attach(self.socket, endpoint, bind)
+            self._attach(endpoint, bind, watch)
         except BaseException:
             self._fail_init()
             raise
@@ -384,6 +426,7 @@ class Subscriber(_Socket):
         """
         deadline = None if timeout_s is None else time.monotonic() + max(0.0, timeout_s)
         while True:
+            self._reconnect_if_due()
             self._drain()
             if self._pending:
                 return self._pending.popleft()[1]
