@@ -326,7 +326,34 @@ class NodeParams:
         max=1000,
     )
     reject_log_period: float = param(
-        5.0, "at most one log line per this period about rejected messages", "s", min=0.0
+        5.0,
+        "at most one log line per this period about rejected messages (and per kind of "
+        "internal error)",
+        "s",
+        min=0.0,
+    )
+    max_stamp_jump: float = param(
+        30.0,
+        "a scan stamped more than this after the previous one, or before it, is rejected "
+        "(stamp_jump) unless the next scan continues its timeline (a source that restarted)",
+        "s",
+        min=0.001,
+        max=1e9,
+    )
+    gravity_max_angle_deg: float = param(
+        15.0,
+        "a scan's gravity (or IMU orientation) farther than this from the map's up is an "
+        "outlier: counted, not used",
+        "deg",
+        min=0.1,
+        max=90.0,
+    )
+    gravity_min_agreeing: int = param(
+        3,
+        "scans whose gravity agree (within gravity_max_angle_deg) before it replaces an "
+        "assumed or estimated up",
+        min=2,
+        max=100,
     )
     map: MapParams = field(default_factory=MapParams)
     frame_id: str = param(
@@ -340,6 +367,8 @@ class NodeParams:
     )
     curve_keys_dir: str = param(
         "",
-        "CURVE key folder: this node's server.key_secret, authorised clients' public keys *.key "
-        "and, when the node connects for scans, the scan driver's public key scan_server.key",
+        "CURVE key folder: this node's server.key_secret, the scan driver's public key "
+        "scan_server.key (the node connects for scans), subscribers/*.key (clients allowed "
+        "to subscribe to results), drivers/*.key (drivers allowed to publish scans when "
+        "scan_bind)",
     )

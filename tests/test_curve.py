@@ -150,27 +150,83 @@ def test_keys_command_writes_a_pair(tmp_path, capsys):
     assert main(["keys", str(tmp_path / "k"), "--name", "robot"]) == 2  # no silent overwrite
 
 
-def test_node_publishes_only_to_authorised_clients(keys, tmp_path):
+def _node_folder(keys, tmp_path, subscribers=("client",)) -> Path:
+    """A node key folder in the documented layout (`supportnode.curve`); the scan driver's
+    pair is "stranger"."""
     folder = tmp_path / "node"
-    folder.mkdir()
+    (folder / "subscribers").mkdir(parents=True)
     for name in ("server.key_secret", "server.key"):
         shutil.copy(keys["made"] / name, folder / name)
-    shutil.copy(keys["made"] / "client.key", folder / "client.key")
-    shutil.copy(keys["made"] / "server.key", folder / "scan_server.key")  # driver = same pair
+    for name in subscribers:
+        shutil.copy(keys["made"] / f"{name}.key", folder / "subscribers" / f"{name}.key")
+    shutil.copy(keys["made"] / "stranger.key", folder / "scan_server.key")
+    return folder
+
+
+def _curve_node(folder: Path, **node_keys) -> Node:
     params = DetectParams()
     node_params = dataclasses.replace(
         params.node,
         curve_enabled=True,
         curve_keys_dir=str(folder),
         pub_endpoint="tcp://127.0.0.1:*",
-        scan_endpoint="tcp://127.0.0.1:*",
-        scan_bind=True,
+        # nothing listens on port 9 (discard): a connecting scan socket just waits
+        scan_endpoint="tcp://127.0.0.1:*" if node_keys.get("scan_bind") else "tcp://127.0.0.1:9",
+        **node_keys,
     )
-    with Node(dataclasses.replace(params, node=node_params)) as node:
+    return Node(dataclasses.replace(params, node=node_params))
+
+
+def test_node_publishes_only_to_authorised_clients(keys, tmp_path):
+    """The key folder's own keys authorise nobody: the scan driver's pair (its public key is
+    the folder's scan_server.key) cannot subscribe to results; a subscriber in subscribers/
+    can; the node's own pair cannot either."""
+    folder = _node_folder(keys, tmp_path)
+    with _curve_node(folder) as node:
         node.open()
         assert node._pub is not None
-        with Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "client")) as sub:
+        with (
+            Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "client")) as sub,
+            Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "stranger")) as drv,
+            Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "server")) as own,
+        ):
             assert _gets_through(node._pub, sub, 5.0)
+            assert not _gets_through(node._pub, drv, 0.5)
+            assert not _gets_through(node._pub, own, 0.2)
+            deadline = time.monotonic() + 3
+            while time.monotonic() < deadline:  # the refusals are counted by the node
+                if node.diagnostics().counters.get("handshake_failures_results_auth", 0) >= 2:
+                    break
+                time.sleep(0.05)
+            assert node.diagnostics().counters["handshake_failures_results_auth"] >= 2
+
+
+def test_node_binding_for_scans_takes_drivers_from_their_folder(keys, tmp_path):
+    folder = _node_folder(keys, tmp_path)
+    (folder / "drivers").mkdir()
+    shutil.copy(keys["made"] / "stranger.key", folder / "drivers" / "stranger.key")
+    with _curve_node(folder, scan_bind=True) as node:
+        node.open()
+        assert node._sub is not None
+        with Publisher(node.scan_endpoint, bind=False, curve=_client_keys(keys, "stranger")) as p:
+            deadline = time.monotonic() + 5.0
+            while node._sub.received == 0 and time.monotonic() < deadline:
+                p.send([b"scan", b"probe"])  # reaches the node, which rejects it as malformed
+                node._sub.recv(0.02)
+            assert node._sub.received > 0
+
+
+def test_old_key_folder_layout_is_a_one_line_error(keys, tmp_path):
+    """Client keys beside the node's own (the old layout) authorised its own pairs too."""
+    folder = _node_folder(keys, tmp_path)
+    shutil.copy(keys["made"] / "client.key", folder / "client.key")
+    with _curve_node(folder) as node, pytest.raises(BusError) as err:
+        node.open()
+    text = str(err.value)
+    assert "client.key" in text and "subscribers/" in text and "drivers/" in text
+    assert "\n" not in text
+    assert main(["run", "--set", "node.curve_enabled=true", "--set",
+                 f"node.curve_keys_dir={folder}", "--duration", "0.1"]) == 2  # fmt: skip
 
 
 def test_node_curve_without_folder_is_an_error():

@@ -47,17 +47,19 @@ def run(args: argparse.Namespace) -> int:
         raise SupportNodeError(f"{args.dir}: cannot write key files ({err.strerror})") from err
     print(f"public key: {public}")
     print(f"secret key: {secret}  (keep private; mode 600)")
-    print("Where to copy them:")
+    print("Where to copy them (the node's folder layout: see supportnode.curve):")
     print(
-        f"  - the socket that BINDS (server) uses {name}.key_secret; for the node: its "
+        f"  - the socket that BINDS (server) uses {name}.key_secret; for the node: "
         "node.curve_keys_dir/server.key_secret"
     )
     print(
         f"  - a server that should accept this key as a client: copy {name}.key into its "
-        "authorised folder (for the node: node.curve_keys_dir)"
+        "authorised folder (for the node: node.curve_keys_dir/subscribers/ to subscribe to "
+        "results, node.curve_keys_dir/drivers/ to publish scans to a node that binds)"
     )
     print(
         f"  - a client connecting to this key's server: {name}.key is its server key "
-        "(for a node connecting to a scan driver: node.curve_keys_dir/scan_server.key)"
+        "(for a node connecting to a scan driver: node.curve_keys_dir/scan_server.key; for "
+        "echo, hz, record, view: --curve-server-key)"
     )
     return 0

@@ -76,14 +76,15 @@ class RateLimitedLog:
         self._last: float | None = None
         self._suppressed = 0
 
-    def warning(self, text: str) -> bool:
-        """Log ``text`` unless a line went out less than ``period`` ago; True when logged."""
+    def warning(self, text: str, exc_info: bool = False) -> bool:
+        """Log ``text`` unless a line went out less than ``period`` ago; True when logged.
+        exc_info: with the traceback of the exception being handled (internal errors)."""
         now = self.clock()
         if self._last is not None and now - self._last < self.period:
             self._suppressed += 1
             return False
         more = f" ({self._suppressed} more since the last report)" if self._suppressed else ""
-        self.logger.warning("%s%s", text, more)
+        self.logger.warning("%s%s", text, more, exc_info=exc_info)
         self._last = now
         self._suppressed = 0
         return True

@@ -79,6 +79,12 @@ def pack_keys(keys: np.ndarray) -> np.ndarray:
     return out
 
 
+def coordinate_range(voxel_size: float) -> np.ndarray:
+    """(3,) metres: the largest |x|, |y|, |z| a map point may have at this voxel size (what
+    :func:`pack_keys` can hold, a voxel short of it)."""
+    return (_OFFS - 1).astype(np.float64) * float(voxel_size)
+
+
 def unpack_keys(packed: np.ndarray) -> np.ndarray:
     """Inverse of :func:`pack_keys`: (N,) int64 -> (N, 3) int64."""
     p = np.asarray(packed, dtype=np.int64)

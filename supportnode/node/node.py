@@ -55,20 +55,20 @@ import zmq
 
 from supportnode import bus
 from supportnode._closing import Closing
-from supportnode.errors import AlignmentError, InputError, ProtocolError, SupportNodeError
-from supportnode.geometry.gravity import estimate_gravity, rotation_to_z
+from supportnode.curve import NodeKeys, node_keys
+from supportnode.errors import InputError, SupportNodeError
 from supportnode.geometry.memo import Memo
-from supportnode.geometry.transform import transform_points
+from supportnode.geometry.transform import quaternion_matrix, transform_points
 from supportnode.msgs import (
     Diagnostics,
-    Limits,
     ObstacleClusters,
     PointCloud,
     SupportSurfaces,
-    decode_any,
 )
 from supportnode.node import incremental
+from supportnode.node.gravity import SOURCES, Gravity, Verdict
 from supportnode.node.incremental import Items
+from supportnode.node.intake import BACKWARD_S, Intake, Reject, scan_problem
 from supportnode.node.latency import LatencyWindow, RateLimitedLog
 from supportnode.node.map import VoxelMap
 from supportnode.node.tracking import ClusterTracker, SurfaceTracker
@@ -87,12 +87,10 @@ SAFE_MIN_HITS = 2
 # Horizontal planes less than this below the sensor, or above it, are ceilings and
 # undersides, not supports: the node publishes only surfaces lower than sensor z minus this, m.
 _UNDER_SENSOR_M = 0.05
-# Gravity estimation without an IMU: every scan at first, then every this many scans.
-_GRAVITY_WARMUP = 5
-_GRAVITY_EVERY = 10
 # A scan stamped this much before the previous one means the source restarted (a replay that
-# loops, a driver restart): the map and ids start over rather than mixing two timelines.
-_TIME_JUMP = 1e-3
+# loops, a driver restart; on the wire, `Intake` admits such a scan only once the next one
+# confirms the new timeline): the map and ids start over rather than mixing two timelines.
+_TIME_JUMP = BACKWARD_S
 # How long one wait for a scan lasts in spin: bounds the reaction time to a stop request.
 _POLL_S = 0.05
 # A scan handed to detection while it was busy waits at most this long for a newer one.
@@ -174,70 +172,6 @@ class _Job:
     merge: int = 0  # number of its merge into the map (Node._merges after it)
 
 
-def quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of the unit quaternion ``q`` = (x, y, z, w)."""
-    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-class _Gravity:
-    """The up direction in the map frame and the correction rotation it implies.
-
-    Given per scan (``imu_orientation`` or ``gravity``): used as is. Otherwise, when
-    ``gravity.enabled``: estimated from the scan's normals and averaged over scans (weighted by
-    inliers), so the correction settles instead of jittering scan to scan.
-    """
-
-    def __init__(self, params: DetectParams) -> None:
-        self.params = params.gravity
-        self.up = np.array([0.0, 0.0, 1.0])
-        self.source = "none"  # none | given | estimated
-        self._sum = np.zeros(3)
-        self._estimates = 0
-        self._scans = 0
-        self.failures = 0
-
-    def update(self, cloud: PointCloud, rotation: np.ndarray, points: np.ndarray) -> None:
-        """Update from one scan; ``rotation``: (3, 3) cloud-to-map, ``points``: cloud frame."""
-        self._scans += 1
-        up_cloud = None
-        if cloud.imu_orientation is not None:
-            up_cloud = quaternion_matrix(cloud.imu_orientation).T @ np.array([0.0, 0.0, 1.0])
-        elif cloud.gravity is not None:
-            up_cloud = -cloud.gravity / np.linalg.norm(cloud.gravity)
-        if up_cloud is not None:
-            self.up, self.source = rotation @ up_cloud, "given"
-            return
-        if not self.params.enabled or self.source == "given":
-            return
-        due = self._estimates < _GRAVITY_WARMUP or self._scans % _GRAVITY_EVERY == 0
-        if not due:
-            return
-        try:
-            est = estimate_gravity(points, self.params)
-        except AlignmentError:
-            self.failures += 1
-            return
-        self._estimates += 1
-        self._sum += max(est.inliers, 1) * (rotation @ est.up)
-        self.up, self.source = self._sum / np.linalg.norm(self._sum), "estimated"
-
-    @property
-    def rotation(self) -> np.ndarray:
-        """(3, 3) map frame -> detection frame (z up)."""
-        return rotation_to_z(self.up)
-
-    @property
-    def tilt_deg(self) -> float:
-        return float(np.degrees(np.arccos(np.clip(self.up[2], -1.0, 1.0))))
-
-
 class Node(Closing):
     """The support-surface node (see the module docstring).
 
@@ -263,9 +197,6 @@ class Node(Closing):
         self.log = logger or log
         self._map_factory = map_factory or (lambda: VoxelMap(self.cfg.map))
         self._context = context
-        self.limits = Limits(
-            max_points=self.cfg.max_points, max_message_bytes=self.cfg.max_message_bytes
-        )
         self.latency = LatencyWindow()
         self.counters: dict[str, int] = {
             "scans_received": 0,
@@ -277,9 +208,10 @@ class Node(Closing):
             "detections_reused": 0,
             "time_jumps": 0,
             "points_nonfinite": 0,
-            "seq_gaps": 0,
             "gravity_failures": 0,
+            "gravity_outliers": 0,
             "diagnostics_sent": 0,
+            "diagnostics_failures": 0,
             "maps_sent": 0,
             "detections_skipped": 0,
             "worker_detections": 0,
@@ -288,6 +220,10 @@ class Node(Closing):
         self.rejects: dict[str, int] = {}
         self.last_reject = ""
         self._reject_log = RateLimitedLog(self.log, self.cfg.reject_log_period)
+        # Its own limit: a flood of rejects must not hide an internal error, nor the reverse.
+        self._error_log = RateLimitedLog(self.log, self.cfg.reject_log_period)
+        self._stream_log = RateLimitedLog(self.log, self.cfg.reject_log_period)
+        self._intake = Intake(self.cfg)  # the scan stream's checks: receiving thread
         self._sub: bus.Subscriber | None = None
         self._pub: bus.Publisher | None = None
         self._stop = threading.Event()
@@ -319,7 +255,9 @@ class Node(Closing):
     # ------------------------------------------------------------------ state
 
     def reset(self) -> None:
-        """Forget the map, the ids and the previous detection (the gravity estimate stays)."""
+        """Forget the map, the ids and the previous detection. The map frame's up direction
+        (fused from the scans' gravity or estimated) stays, as do the scan stream's
+        checks (its timeline and seq): a source that restarted keeps its frames."""
         with self._track_lock:
             self._reset()
 
@@ -328,14 +266,13 @@ class Node(Closing):
         self.surface_tracker = SurfaceTracker(min_iou=0.2, height_tolerance=0.05, max_misses=3)
         self.cluster_tracker = ClusterTracker(cell_size=0.02, min_iou=0.2, max_misses=3)
         if not hasattr(self, "gravity"):
-            self.gravity = _Gravity(self.params)
+            self.gravity = Gravity(self.params)
         self._items: Items | None = None
         self._items_rotation: np.ndarray | None = None
         self._items_source: tuple[object, int | None] = (None, None)  # map and its version
         self._memo = Memo()  # per-cluster results of the previous detection
         self._last_stamp: float | None = None
         self._last_detect: float | None = None
-        self._last_seq: int | None = None
         self._out_seq = 0
         self._last_counts = (0, 0)
         self._pending: tuple[np.ndarray, np.ndarray] | None = None
@@ -346,8 +283,16 @@ class Node(Closing):
     def process(self, cloud: PointCloud) -> NodeOutput:
         """Run one scan through gravity, map, detection and tracking; returns the messages.
 
-        Raises InputError for a scan the node cannot use (no points); the map is then unchanged.
+        Raises InputError for a scan the node cannot use (no finite points, out of the map's
+        range: `supportnode.node.intake.scan_problem`); the map is then unchanged.
         """
+        problem = scan_problem(cloud, self._intake.limit)
+        if problem is not None:
+            raise InputError(f"scan seq {cloud.seq}: {problem.text}")
+        return self._process(cloud)
+
+    def _process(self, cloud: PointCloud) -> NodeOutput:
+        """`process` of a scan the intake admitted."""
         t_start = time.perf_counter()
         timings: dict[str, float] = {}
         job = self._ingest(cloud, timings)
@@ -366,20 +311,16 @@ class Node(Closing):
         that the next detection recomputes. Holds the map lock. defer: leave the scan's
         clearing pending in the map (see `_finish_map`), when the map can."""
         if cloud.count == 0:
-            raise InputError("scan has no finite points")
+            raise InputError("scan has no finite points")  # admitted scans have some
         with self._lock:
             stamp = float(cloud.stamp)
             if self._last_stamp is not None and stamp < self._last_stamp - _TIME_JUMP:
                 self.counters["time_jumps"] += 1
-                self.log.warning(
-                    "scan stamp %.3f is before the previous %.3f: source restarted, map reset",
-                    stamp,
-                    self._last_stamp,
+                self._stream_log.warning(
+                    f"scan stamp {stamp:.3f} is before the previous {self._last_stamp:.3f}: "
+                    "source restarted, map reset"
                 )
                 self.reset()
-            if self._last_seq is not None and cloud.seq > self._last_seq + 1:
-                self.counters["seq_gaps"] += cloud.seq - self._last_seq - 1
-            self._last_seq = cloud.seq
             self.counters["points_nonfinite"] += int(cloud.dropped_nonfinite)
             pose = np.eye(4)
             if cloud.pose is not None:
@@ -388,8 +329,9 @@ class Node(Closing):
 
             t = time.perf_counter()
             failures = self.gravity.failures
-            self.gravity.update(cloud, pose[:3, :3], cloud.points)
+            verdict = self.gravity.update(cloud, pose[:3, :3], cloud.points)
             self.counters["gravity_failures"] += self.gravity.failures - failures
+            self._gravity_verdict(cloud, verdict)
             timings["gravity"] = time.perf_counter() - t
 
             t = time.perf_counter()
@@ -407,6 +349,28 @@ class Node(Closing):
             frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
             self._posed, self._frame = cloud.pose is not None, cloud.frame_id
             return _Job(pose, stamp, frame, self._generation, merge=self._merges)
+
+    def _gravity_verdict(self, cloud: PointCloud, verdict: Verdict) -> None:
+        """Count a scan's gravity outlier; log the first one and every new up adopted."""
+        if verdict is Verdict.OUTLIER:
+            self.counters["gravity_outliers"] += 1
+            if self.counters["gravity_outliers"] == 1:
+                self.log.warning(
+                    "%s: scan seq %d: its gravity is more than %g deg from the map's up %s "
+                    "(%s): not used (logged once; counted in gravity_outliers)",
+                    self.cfg.name,
+                    cloud.seq,
+                    self.cfg.gravity_max_angle_deg,
+                    np.round(self.gravity.up, 3).tolist(),
+                    self.gravity.source,
+                )
+        elif verdict is Verdict.ADOPTED:
+            self.log.info(
+                "%s: the map's up is %s, from %d scans' gravity that agree",
+                self.cfg.name,
+                np.round(self.gravity.up, 3).tolist(),
+                self.cfg.gravity_min_agreeing,
+            )
 
     def _detection_due(self, stamp: float) -> bool:
         rate = self.cfg.detection_rate
@@ -706,13 +670,12 @@ class Node(Closing):
         if msg is None:
             return None
         try:
-            out = self.process(msg)
+            out = self._process(msg)
         except SupportNodeError as err:
             self._reject("unusable", f"scan seq {msg.seq}: {err}")
             return None
         except Exception as err:
-            self.log.exception("scan seq %s: internal error", msg.seq)
-            self._reject("internal_error", f"scan seq {msg.seq}: {type(err).__name__}: {err}")
+            self._internal_error(f"scan seq {msg.seq}", err)
             return None
         out.timings["decode"] = decode
         self.latency.add("decode", decode)
@@ -726,8 +689,7 @@ class Node(Closing):
         try:
             msg = self._decode(frames)
         except Exception as err:  # a decoder bug must not end the node's receiving loop
-            self.log.exception("scan message: internal error while decoding")
-            self._reject("internal_error", f"decoding: {type(err).__name__}: {err}")
+            self._internal_error("decoding", err)
             return None
         return None if msg is None else _Decoded(msg, time.perf_counter() - t)
 
@@ -740,22 +702,27 @@ class Node(Closing):
         return msg, time.perf_counter() - t
 
     def _decode(self, frames: Any) -> PointCloud | None:
-        """The scan in ``frames``, or None (counted and logged) when it is not a usable one."""
-        try:
-            msg = decode_any(frames, self.limits)
-        except ProtocolError as err:
-            self._reject(_reason(str(err)), str(err))
+        """The scan in ``frames``, or None (counted and logged) when the intake rejects it."""
+        got = self._intake.admit(frames)
+        if isinstance(got, Reject):
+            self._reject(got.reason, got.text)
             return None
-        if not isinstance(msg, PointCloud):
-            self._reject("wrong_type", f"expected a PointCloud on the scan topic, got {msg.TYPE}")
-            return None
-        return msg
+        return got
 
     def _reject(self, reason: str, text: str) -> None:
         self.counters["scans_rejected"] += 1
         self.rejects[reason] = self.rejects.get(reason, 0) + 1
         self.last_reject = text
         self._reject_log.warning(f"{self.cfg.name}: rejected a scan ({reason}): {text}")
+
+    def _internal_error(self, where: str, err: Exception) -> None:
+        """A bug met while handling a scan: counted as an internal_error reject, logged with
+        its traceback at most once per ``node.reject_log_period``. Call from an except block."""
+        text = f"{where}: {type(err).__name__}: {err}"
+        self.counters["scans_rejected"] += 1
+        self.rejects["internal_error"] = self.rejects.get("internal_error", 0) + 1
+        self.last_reject = text
+        self._error_log.warning(f"{self.cfg.name}: internal error, {text}", exc_info=True)
 
     def open(self) -> None:
         """Create the sockets (done by `spin`; in-process use needs none)."""
@@ -767,7 +734,8 @@ class Node(Closing):
             bind=self.cfg.pub_bind,
             context=self._context,
             hwm=10,
-            curve=curve,
+            curve=None if curve is None else curve.results,
+            watch=self._handshake_report("results"),
         )
         try:
             self._sub = bus.Subscriber(
@@ -777,29 +745,34 @@ class Node(Closing):
                 keep_newest=self.cfg.queue,
                 context=self._context,
                 max_message_bytes=self.cfg.max_message_bytes,
-                curve=curve,
+                curve=None if curve is None else curve.scans,
                 check=self._check_scan,
+                watch=self._handshake_report("scans"),
             )
         except BaseException:
             self._pub.close()
             self._pub = None
             raise
 
-    def _curve_keys(self) -> bus.CurveKeys | None:
-        """CURVE keys from ``curve_keys_dir`` when ``curve_enabled``: the node's pair
-        ``server.key_secret`` (server when a socket binds, client identity when it connects),
-        authorised clients ``*.key``, and ``scan_server.key`` (the scan driver's public key, used
-        when the scan socket connects; a publisher that connects uses it as its server key too)."""
+    def _handshake_report(self, socket: str) -> Callable[[str], None]:
+        """How a socket reports a failed handshake (`supportnode.handshake`): a log line."""
+        return lambda line: self.log.warning("%s: %s %s", self.cfg.name, socket, line)
+
+    def _handshake_counters(self) -> dict[str, int]:
+        """Failed handshakes of the node's sockets, by socket and kind."""
+        out = {}
+        for name, sock in (("scans", self._sub), ("results", self._pub)):
+            if sock is not None:
+                for kind, n in sock.handshake_failures().items():
+                    out[f"handshake_failures_{name}_{kind}"] = n
+        return out
+
+    def _curve_keys(self) -> NodeKeys | None:
+        """CURVE keys of both sockets from ``curve_keys_dir`` when ``curve_enabled`` (the
+        folder's layout: `supportnode.curve`)."""
         if not self.cfg.curve_enabled:
             return None
-        folder = self.cfg.curve_keys_dir
-        if not folder:
-            raise bus.BusError("node.curve_enabled is true but node.curve_keys_dir is empty")
-        return bus.CurveKeys(
-            key_file=os.path.join(folder, "server.key_secret"),
-            authorized_dir=folder,
-            server_key=os.path.join(folder, "scan_server.key"),
-        )
+        return node_keys(self.cfg.curve_keys_dir, self.cfg.scan_bind)
 
     @property
     def pub_endpoint(self) -> str:
@@ -876,7 +849,7 @@ class Node(Closing):
                         if out is not None and out.surfaces is not None:
                             self._publish(out, t_recv)
                 if time.monotonic() >= next_diag:
-                    self.publish_diagnostics()
+                    self._publish_diagnostics_safely()
                     next_diag = time.monotonic() + period
                 if self.cfg.map_period > 0 and time.monotonic() >= next_map:
                     self.publish_map()
@@ -909,8 +882,7 @@ class Node(Closing):
             self._reject("unusable", f"scan seq {msg.seq}: {err}")
             return
         except Exception as err:
-            self.log.exception("scan seq %s: internal error", msg.seq)
-            self._reject("internal_error", f"scan seq {msg.seq}: {type(err).__name__}: {err}")
+            self._internal_error(f"scan seq {msg.seq}", err)
             return
         self.latency.add_all(timings)
         if not self._detection_due(job.stamp):
@@ -988,8 +960,7 @@ class Node(Closing):
             try:
                 out = self._detect_job(job, timings, early)
             except Exception as err:
-                self.log.exception("scan at %.3f: internal error in detection", job.stamp)
-                self._reject("internal_error", f"detection: {type(err).__name__}: {err}")
+                self._internal_error(f"detection of the scan at {job.stamp:.3f}", err)
                 out = None
             done_at = time.perf_counter()
             if out is not None:
@@ -1015,8 +986,7 @@ class Node(Closing):
         try:
             self._finish_map(merge)
         except Exception as err:
-            self.log.exception("internal error in the map's clearing")
-            self._reject("internal_error", f"clearing: {type(err).__name__}: {err}")
+            self._internal_error("clearing", err)
         finally:
             self._lock.release()
 
@@ -1056,6 +1026,8 @@ class Node(Closing):
             self.counters["scans_received"] = self._sub.received
             self.counters["scans_dropped"] = self._sub.dropped
         counters = dict(self.counters)
+        counters.update(self._intake.counters())
+        counters.update(self._handshake_counters())
         counters.update({f"rejected_{k}": v for k, v in self.rejects.items()})
         stats = self.map.stats()
         counters.update({f"map_{k}": int(v) for k, v in stats.items()})
@@ -1068,7 +1040,7 @@ class Node(Closing):
             "gravity_up_x": float(up[0]),
             "gravity_up_y": float(up[1]),
             "gravity_up_z": float(up[2]),
-            "gravity_source": float(("none", "given", "estimated").index(self.gravity.source)),
+            "gravity_source": float(SOURCES.index(self.gravity.source)),
             "rss_mb": _rss_mb(),
             "rss_mb_worker": self._worker.rss_mb() if self._worker is not None else math.nan,
         }
@@ -1088,6 +1060,18 @@ class Node(Closing):
             gauges={k: v for k, v in gauges.items() if math.isfinite(v)},
             seq=self._diag_seq,
         )
+
+    def _publish_diagnostics_safely(self) -> None:
+        """`publish_diagnostics` from spin: an error is counted and logged (rate-limited),
+        never the end of the node."""
+        try:
+            self.publish_diagnostics()
+        except Exception as err:
+            self.counters["diagnostics_failures"] += 1
+            self._error_log.warning(
+                f"{self.cfg.name}: diagnostics not sent: {type(err).__name__}: {err}",
+                exc_info=not isinstance(err, SupportNodeError),
+            )
 
     def publish_diagnostics(self) -> Diagnostics:
         """Send the current Diagnostics (sockets must be open); returns it."""
@@ -1148,19 +1132,6 @@ def _unsupported(c: Any) -> Any:
     import dataclasses
 
     return dataclasses.replace(c, surface_id=None)
-
-
-def _reason(text: str) -> str:
-    """Short reject reason of a ProtocolError text, for the counters."""
-    if "schema version" in text:
-        return "version"
-    if "max_points" in text:
-        return "too_many_points"
-    if "max_message_bytes" in text:
-        return "oversized"
-    if "NaN" in text or "finite" in text:
-        return "nonfinite"
-    return "malformed"
 
 
 def _rss_mb() -> float:

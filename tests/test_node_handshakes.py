@@ -1,0 +1,172 @@
+"""A peer with the wrong security mechanism or a wrong key never cuts the node off from its
+driver: the failed handshake is logged once with the peer's address, counted in diagnostics,
+and the legitimate driver is heard again (issue 21, fault 5). Over real 127.0.0.1 sockets,
+both orders (a plain peer meeting a CURVE node, a CURVE peer meeting a plain node), both
+topologies (the node connecting for scans, its default, and binding), and wrong keys refused
+by ZAP."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import shutil
+import socket
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zmq
+from test_node_hostile import frames, scene
+
+from supportnode.bus import CurveKeys, Publisher, Subscriber
+from supportnode.msgs import SupportSurfaces, decode_any
+from supportnode.node.node import Node
+from supportnode.params import DetectParams
+
+pytestmark = pytest.mark.skipif(not zmq.has("curve"), reason="libzmq without CURVE")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def keys(tmp_path: Path) -> dict[str, Path]:
+    """Key pairs (node, driver, client, stranger) and the node's folder in its layout."""
+    import zmq.auth
+
+    made = tmp_path / "made"
+    made.mkdir()
+    for name in ("node", "driver", "client", "stranger"):
+        zmq.auth.create_certificates(made, name)
+    folder = tmp_path / "node"
+    for sub in ("subscribers", "drivers"):
+        (folder / sub).mkdir(parents=True)
+    shutil.copy(made / "node.key_secret", folder / "server.key_secret")
+    shutil.copy(made / "driver.key", folder / "scan_server.key")
+    shutil.copy(made / "client.key", folder / "subscribers" / "client.key")
+    shutil.copy(made / "driver.key", folder / "drivers" / "driver.key")
+    trusts_node = tmp_path / "driver_allows"  # a binding driver's authorised clients
+    trusts_node.mkdir()
+    shutil.copy(made / "node.key", trusts_node / "node.key")
+    return {"made": made, "folder": folder, "trusts_node": trusts_node}
+
+
+def _driver(keys, endpoint: str, node_binds: bool, curve: bool, pair: str = "driver"):
+    """A scan publisher: binds when the node connects, connects when it binds."""
+    made = keys["made"]
+    ck = None
+    if curve and node_binds:
+        ck = CurveKeys(made / f"{pair}.key_secret", server_key=made / "node.key")
+    elif curve:
+        ck = CurveKeys(made / f"{pair}.key_secret", authorized_dir=keys["trusts_node"])
+    return Publisher(endpoint, bind=not node_binds, curve=ck, hwm=1000)
+
+
+@contextlib.contextmanager
+def _node(keys, endpoint: str, node_binds: bool, curve: bool):
+    p = DetectParams()
+    node_p = dataclasses.replace(
+        p.node,
+        scan_endpoint=endpoint,
+        scan_bind=node_binds,
+        pub_endpoint="tcp://127.0.0.1:*",
+        curve_enabled=curve,
+        curve_keys_dir=str(keys["folder"]) if curve else "",
+        map_period=0.0,
+        diagnostics_period=0.2,
+        detect_process=False,
+    )
+    with Node(dataclasses.replace(p, node=node_p)) as node:
+        node.open()
+        made = keys["made"]
+        ck = CurveKeys(made / "client.key_secret", server_key=made / "node.key") if curve else None
+        sub = Subscriber(node.pub_endpoint, ["surfaces", "diagnostics"], keep_newest=50, curve=ck)
+        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+        th.start()
+        try:
+            yield sub
+        finally:
+            node.stop()
+            th.join(10)
+            sub.close()
+
+
+def _heard(pub: Publisher, sub: Subscriber, seconds: float) -> bool:
+    """Scans from ``pub`` get results within ``seconds``."""
+    pts = scene(4000)
+    deadline = time.monotonic() + seconds
+    stamp = time.time()
+    while time.monotonic() < deadline:
+        stamp += 0.1
+        pub.send(frames(pts, stamp))
+        t = time.monotonic() + 0.1
+        while (f := sub.recv(max(0.0, t - time.monotonic()))) is not None:
+            if isinstance(decode_any(f), SupportSurfaces):
+                return True
+    return False
+
+
+def _counter(sub: Subscriber, name: str, want: int, seconds: float = 5.0) -> int:
+    """The diagnostics counter ``name`` once it reaches ``want`` (or its last value)."""
+    deadline, value = time.monotonic() + seconds, 0
+    while time.monotonic() < deadline and value < want:
+        f = sub.recv(0.1)
+        if f is not None and (msg := decode_any(f)).TYPE == "Diagnostics":
+            value = msg.counters.get(name, 0)
+    return value
+
+
+@pytest.mark.parametrize("node_binds", [False, True], ids=["node_connects", "node_binds"])
+@pytest.mark.parametrize("node_curve", [True, False], ids=["curve_node", "plain_node"])
+def test_wrong_mechanism_peer_then_the_right_driver_is_heard(keys, caplog, node_binds, node_curve):
+    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    with caplog.at_level(logging.WARNING, logger="supportnode.node"):
+        with _node(keys, endpoint, node_binds, node_curve) as sub:
+            with _driver(keys, endpoint, node_binds, curve=not node_curve) as wrong:
+                assert not _heard(wrong, sub, 1.0)
+                failures = _counter(sub, "handshake_failures_scans_mechanism", 1)
+            with _driver(keys, endpoint, node_binds, curve=node_curve) as right:
+                assert _heard(right, sub, 10.0), "the legitimate driver is not heard"
+    assert failures >= 1
+    lines = [r.getMessage() for r in caplog.records if "handshake with" in r.getMessage()]
+    assert len(lines) == 1, lines  # once, though the wrong peer retried
+    assert "security mechanism mismatch" in lines[0]
+    # the peer's address: the endpoint when the node connects, the driver's port when it binds
+    assert ("127.0.0.1:" + endpoint.rsplit(":", 1)[1]) in lines[0] or node_binds
+    assert "127.0.0.1:" in lines[0] or "address gone" in lines[0]
+
+
+def test_driver_with_a_key_not_authorised_is_refused_by_zap(keys, caplog):
+    """The node binds for scans: a driver whose key is not in drivers/ is refused (ZAP),
+    logged with its address and counted; the authorised driver is heard."""
+    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    with caplog.at_level(logging.WARNING, logger="supportnode.node"):
+        with _node(keys, endpoint, True, True) as sub:
+            with _driver(keys, endpoint, True, True, pair="stranger") as stranger:
+                assert not _heard(stranger, sub, 1.0)
+                assert _counter(sub, "handshake_failures_scans_auth", 1) >= 1
+            with _driver(keys, endpoint, True, True) as right:
+                assert _heard(right, sub, 10.0)
+    lines = [r.getMessage() for r in caplog.records if "its key was refused" in r.getMessage()]
+    assert len(lines) == 1 and "127.0.0.1:" in lines[0], lines
+
+
+def test_node_refused_by_its_driver_reconnects_once_the_driver_accepts_it(keys, tmp_path):
+    """The node connects to a driver whose ZAP refuses the node's key (libzmq then ends the
+    session for good); the driver restarts authorising it, and the node is heard again."""
+    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    nobody = tmp_path / "nobody"
+    nobody.mkdir()
+    made = keys["made"]
+    with _node(keys, endpoint, False, True) as sub:
+        refusing = CurveKeys(made / "driver.key_secret", authorized_dir=nobody)
+        with Publisher(endpoint, curve=refusing, hwm=1000) as driver:
+            assert not _heard(driver, sub, 1.0)
+            assert _counter(sub, "handshake_failures_scans_auth", 1) >= 1
+        with _driver(keys, endpoint, False, True) as driver:
+            assert _heard(driver, sub, 10.0)
