@@ -105,6 +105,34 @@ def test_stop_while_detecting_returns_within_the_poll(rng):
     w.close()
 
 
+@pytest.mark.parametrize("surfaces_first", [False, True])
+def test_parent_gone_while_detecting_ends_the_worker_quietly(rng, surfaces_first):
+    """A node stopped by SIGTERM/SIGINT closes its connection while the worker detects; the
+    worker's reply then meets a closed socket: it ends with exit code 0 and prints nothing
+    (it printed BrokenPipeError tracebacks, 2 of 6 signals on a loaded node)."""
+    import socket
+    from multiprocessing.connection import Connection
+
+    parent, child = socket.socketpair()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "supportnode.node.worker", str(child.fileno())],
+        pass_fds=(child.fileno(),),
+        stdin=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    child.close()
+    conn = Connection(parent.detach())
+    conn.send(DetectParams())
+    assert conn.poll(60) and conn.recv()[0] == "ready"
+    pts = np.concatenate([_scene(rng) + (5.0 * i, 0.0, 0.0) for i in range(4)])
+    conn.send((pts.shape, pts.dtype.str, surfaces_first, None))
+    conn.send_bytes(np.ascontiguousarray(pts))
+    conn.close()  # at once: the worker is detecting
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and "Traceback" not in err and "Error" not in err, err
+
+
 def test_worker_entry_point_without_a_descriptor_is_a_usage_error():
     r = subprocess.run(
         [sys.executable, "-m", "supportnode.node.worker"], capture_output=True, text=True

@@ -15,7 +15,9 @@ thread at a time. The worker keeps its own `Memo` of per-cluster results between
 the same answer as a detection without it. It ends when the parent closes the connection or
 dies (end of file on its socket), and ignores SIGINT and SIGTERM: a Ctrl-C, or `launch`
 stopping the node, signals the whole process group, and the parent decides when the worker
-stops (a worker dying first would look like a crash to the node).
+stops (a worker dying first would look like a crash to the node). A parent that closes the
+connection while the worker detects (a normal shutdown) ends the worker quietly when it next
+writes; errors in a detection are logged at most once per ``node.reject_log_period``.
 
 Wire: a socket pair wrapped in `multiprocessing.connection.Connection` (framed messages).
 Parent to worker: `DetectParams`, then per detection a header (shape, dtype, surfaces first,
@@ -188,14 +190,28 @@ class DetectionWorker:
             self._proc.wait()
 
 
+# The parent closed the connection: a shutdown, not an error.
+_PARENT_GONE = (BrokenPipeError, ConnectionResetError, EOFError)
+
+
 def _serve(conn: Connection) -> int:
     # Imported here: the parent imports this module without paying for the pipeline.
+    import logging
+
     from supportnode.geometry.memo import Memo
     from supportnode.node import incremental
     from supportnode.node.allocator import retain_freed_memory
+    from supportnode.node.latency import RateLimitedLog
 
     retain_freed_memory()  # as the node's own process: the working set repeats every scan
     params = conn.recv()
+    logger = logging.getLogger("supportnode.worker")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("[detection worker] %(levelname)s %(message)s"))
+        logger.addHandler(handler)
+        logger.propagate = False
+    errors = RateLimitedLog(logger, params.node.reject_log_period)
     memo = Memo()
     conn.send(("ready", os.getpid()))
     while True:
@@ -211,12 +227,16 @@ def _serve(conn: Connection) -> int:
             items = incremental.full(
                 points, params, memo=memo, on_surfaces=early, free_below=free_below
             )
+            conn.send(("ok", items, time.perf_counter() - t))
+        except _PARENT_GONE:
+            return 0
         except Exception as err:  # reported to the parent, which logs and counts it
-            traceback.print_exc()
-            conn.send(("error", f"{type(err).__name__}: {err}"))
+            errors.warning(f"detection failed: {traceback.format_exc()}")
             memo = Memo()  # a detection that failed half way may have left it partial
-            continue
-        conn.send(("ok", items, time.perf_counter() - t))
+            try:
+                conn.send(("error", f"{type(err).__name__}: {err}"))
+            except _PARENT_GONE:
+                return 0
 
 
 def main(argv: list[str] | None = None) -> int:
