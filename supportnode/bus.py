@@ -20,14 +20,11 @@ Message size: ``Subscriber(max_message_bytes=...)`` counts and discards larger m
 and drops the connection without reconnecting). Every receiving socket of the project passes a
 limit (the node: ``node.max_message_bytes``; `supportnode.client`: its wire limits).
 
-Security (optional): ``curve=CurveKeys(...)`` encrypts and authenticates a socket with CURVE.
-The binding socket is the server: it uses its own secret key and accepts only clients whose
-public keys (``*.key``) are in ``authorized_dir``, checked by a ZAP handler
-(`zmq.auth.thread.ThreadAuthenticator`, one per context, each server socket with its own ZAP
-domain). The connecting socket is the client: its own key pair plus the server's public key.
-Key pairs are made by ``supportnode keys DIR --name NAME`` (``NAME.key`` public,
-``NAME.key_secret`` both). A peer without CURVE, or with a key not authorised, never completes
-the handshake, so it neither receives nor delivers anything.
+Security (optional): ``curve=CurveKeys(...)`` encrypts and authenticates a socket with CURVE
+(`supportnode.curve`: the binding socket is the server and accepts only the clients whose
+public keys are in its ``authorized_dir``; the connecting one is the client). A peer without
+CURVE, or with a key not authorised, never completes the handshake, so it neither receives
+nor delivers anything.
 
 Failed handshakes (optional): ``watch=report`` watches the socket's ZeroMQ monitor
 (`supportnode.handshake`): each failure is counted in ``handshake_failures()`` by kind and
@@ -41,21 +38,26 @@ from __future__ import annotations
 
 import collections
 import errno
-import itertools
-import os
-import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any, TypeAlias
 
 import zmq
 
 from supportnode._closing import Closing
-from supportnode.errors import SupportNodeError
+from supportnode.curve import CurveKeys, configure_curve, release_curve
+from supportnode.errors import BusError
 from supportnode.handshake import HandshakeWatch
 
-__all__ = ["BusError", "CurveKeys", "Frames", "Publisher", "Subscriber", "check_endpoint"]
+__all__ = [
+    "BusError",
+    "CurveKeys",
+    "Frames",
+    "Publisher",
+    "Subscriber",
+    "Tap",
+    "check_endpoint",
+]
 
 #: One multipart message: ``[topic, *payload]``. Received payload frames are zero-copy views.
 Frames: TypeAlias = "list[bytes | memoryview]"
@@ -70,118 +72,6 @@ _REFILL_WAIT_MS = 5
 # that lands just before the poll call would otherwise wait for the next message, forever on a
 # quiet topic (an example program ignored Ctrl-C that way, now and then).
 _WAIT_SLICE_MS = 100
-
-
-class BusError(SupportNodeError):
-    """A socket cannot bind or connect to an endpoint (bad address, address in use), or its
-    CURVE keys cannot be used (missing or unreadable key file)."""
-
-
-@dataclass(frozen=True)
-class CurveKeys:
-    """CURVE keys of one socket; which fields are needed depends on whether it binds.
-
-    ``key_file``: this socket's key pair, a ``.key_secret`` file (both sides).
-    ``authorized_dir``: server (binding) side: folder of the authorised clients' public keys
-    (``*.key``); clients whose key is not there are refused.
-    ``server_key``: client (connecting) side: the server's public key file (``.key``).
-    """
-
-    key_file: str | os.PathLike[str]
-    authorized_dir: str | os.PathLike[str] = ""
-    server_key: str | os.PathLike[str] = ""
-
-
-def _load_key(path: str | os.PathLike[str], need_secret: bool) -> tuple[bytes, bytes | None]:
-    """(public, secret) z85 keys of a certificate file, or a one-line BusError naming it."""
-    import zmq.auth
-
-    name = os.fspath(path)
-    if not name:
-        raise BusError("CURVE: no key file given")
-    if not os.path.isfile(name):
-        raise BusError(f"{name}: CURVE key file not found")
-    try:
-        with open(name, "rb"):
-            pass
-        public, secret = zmq.auth.load_certificate(name)
-    except OSError as err:
-        raise BusError(f"{name}: cannot read CURVE key file ({err.strerror or err})") from err
-    except ValueError as err:
-        raise BusError(f"{name}: not a CURVE certificate (no public-key)") from err
-    if need_secret and not secret:
-        raise BusError(
-            f"{name}: holds no secret key (use the .key_secret file made by `supportnode keys`)"
-        )
-    return public, secret
-
-
-def _load_authorized(folder: str | os.PathLike[str]) -> None:
-    """Check every ``*.key`` in ``folder`` loads; one-line BusError naming the culprit."""
-    name = os.fspath(folder)
-    if not name:
-        raise BusError("CURVE server: no authorized_dir given (folder of clients' *.key)")
-    if not os.path.isdir(name):
-        raise BusError(f"{name}: CURVE authorised-keys folder not found")
-    for entry in sorted(os.listdir(name)):
-        if entry.endswith(".key"):
-            _load_key(os.path.join(name, entry), need_secret=False)
-
-
-# One ZAP handler (ThreadAuthenticator) per context, shared by that context's CURVE servers;
-# each server socket gets its own ZAP domain so it accepts only its own folder's keys.
-_auth_lock = threading.Lock()
-_auths: dict[int, tuple[zmq.Context, Any, int]] = {}
-_domains = itertools.count()
-
-
-def _auth_acquire(context: zmq.Context, folder: str) -> str:
-    """Start (or share) the context's authenticator; returns the new socket's ZAP domain."""
-    from zmq.auth.thread import ThreadAuthenticator
-
-    domain = f"supportnode.{os.getpid()}.{next(_domains)}"
-    with _auth_lock:
-        ctx, auth, users = _auths.get(id(context), (context, None, 0))
-        if auth is None:
-            auth = _start_authenticator(ThreadAuthenticator, context)
-        try:
-            auth.configure_curve(domain=domain, location=folder)
-        except (OSError, ValueError) as err:
-            if users == 0:
-                auth.stop()
-            raise BusError(f"{folder}: cannot load CURVE public keys ({err})") from err
-        _auths[id(context)] = (ctx, auth, users + 1)
-    return domain
-
-
-def _start_authenticator(factory: Any, context: zmq.Context) -> Any:
-    """Start a ZAP handler. libzmq frees the handler's inproc address asynchronously after a
-    previous handler stopped, so binding may briefly find it in use: retry for up to 2 s."""
-    deadline = time.monotonic() + 2.0
-    while True:
-        auth = factory(context)
-        try:
-            auth.start()
-            return auth
-        except zmq.ZMQError as err:
-            if err.errno != zmq.EADDRINUSE or time.monotonic() > deadline:
-                raise BusError(f"cannot start the CURVE authenticator: {err}") from err
-            time.sleep(0.02)
-
-
-def _auth_release(context: zmq.Context, domain: str) -> None:
-    """Forget ``domain``; stop the context's authenticator when no server uses it."""
-    with _auth_lock:
-        entry = _auths.get(id(context))
-        if entry is None:
-            return
-        ctx, auth, users = entry
-        auth.certs.pop(domain, None)
-        if users <= 1:
-            del _auths[id(context)]
-            auth.stop()
-        else:
-            _auths[id(context)] = (ctx, auth, users - 1)
 
 
 def check_endpoint(endpoint: str) -> str:
@@ -229,20 +119,24 @@ class _Socket(Closing):
         self._watch: HandshakeWatch | None = None
 
     def _attach(self, endpoint: str, bind: bool, watch: Callable[[str], None] | None) -> None:
-        """Bind or connect, then watch the handshakes when asked (`supportnode.handshake`)."""
-        self.endpoint = _attach(self.socket, endpoint, bind)
+        """Bind or connect, watching the handshakes when asked (`supportnode.handshake`): the
+        monitor first, since a connection to a peer already there may fail at once."""
         if watch is not None:
             kind = "subscriber" if self.socket.type == zmq.SUB else "publisher"
             self._watch = HandshakeWatch(
-                self.socket, self.endpoint, name=kind, connects=not bind, report=watch
+                self.socket, endpoint, name=kind, connects=not bind, report=watch
             )
+        self.endpoint = _attach(self.socket, endpoint, bind)
+        if self._watch is not None:
+            self._watch.endpoint = self.endpoint  # the port bound for tcp://host:*
 
     def handshake_failures(self) -> dict[str, int]:
         """Failed handshakes by kind (`supportnode.handshake.KINDS`); empty when not watched."""
         return self._watch.failures() if self._watch is not None else {}
 
-    def _reconnect_if_due(self) -> None:
-        """A new session to the endpoint after a failed handshake ended the last one."""
+    def keep_connected(self) -> None:
+        """A new session to the endpoint after a failed handshake ended the last one, when
+        one is due (`recv` and `send` call it; so do readers of ``socket`` itself)."""
         if self._watch is None or not self._watch.reconnect_due():
             return
         try:
@@ -253,31 +147,8 @@ class _Socket(Closing):
 
     def _setup_curve(self, curve: CurveKeys | None, bind: bool) -> None:
         """Configure CURVE before bind/connect: server if binding, else client."""
-        if curve is None:
-            return
-        if not zmq.has("curve"):
-            raise BusError("CURVE requested but this libzmq was built without CURVE support")
-        public, secret = _load_key(curve.key_file, need_secret=True)
-        assert secret is not None  # _load_key raised otherwise
-        try:
-            if bind:
-                _load_authorized(curve.authorized_dir)
-                self.socket.setsockopt(zmq.CURVE_SERVER, 1)
-                self.socket.setsockopt(zmq.CURVE_SECRETKEY, secret)
-                self._zap_domain = _auth_acquire(self._context, os.fspath(curve.authorized_dir))
-                self.socket.setsockopt_string(zmq.ZAP_DOMAIN, self._zap_domain)
-                # Without this, libzmq accepts every CURVE client while no ZAP handler is
-                # bound (e.g. while the shared authenticator restarts): fail closed instead.
-                self.socket.setsockopt(zmq.ZAP_ENFORCE_DOMAIN, 1)
-            else:
-                if not os.fspath(curve.server_key):
-                    raise BusError("CURVE client: no server_key given (the server's .key file)")
-                server_public, _ = _load_key(curve.server_key, need_secret=False)
-                self.socket.setsockopt(zmq.CURVE_PUBLICKEY, public)
-                self.socket.setsockopt(zmq.CURVE_SECRETKEY, secret)
-                self.socket.setsockopt(zmq.CURVE_SERVERKEY, server_public)
-        except zmq.ZMQError as err:
-            raise BusError(f"{os.fspath(curve.key_file)}: invalid CURVE key ({err})") from err
+        if curve is not None:
+            self._zap_domain = configure_curve(self.socket, self._context, curve, bind)
 
     def close(self) -> None:
         """Close the socket now, discarding anything unsent (idempotent)."""
@@ -290,7 +161,7 @@ class _Socket(Closing):
             self.socket.close(linger=0)
         if self._zap_domain:
             domain, self._zap_domain = self._zap_domain, ""
-            _auth_release(self._context, domain)
+            release_curve(self._context, domain)
 
     @property
     def closed(self) -> bool:
@@ -342,7 +213,7 @@ class Publisher(_Socket):
         not modify them afterwards (numpy arrays: send a copy if you will reuse the array)."""
         if not frames:
             raise ValueError("a message needs at least a topic frame")
-        self._reconnect_if_due()
+        self.keep_connected()
         self.socket.send_multipart(list(frames), copy=False)
 
 
@@ -426,7 +297,7 @@ class Subscriber(_Socket):
         """
         deadline = None if timeout_s is None else time.monotonic() + max(0.0, timeout_s)
         while True:
-            self._reconnect_if_due()
+            self.keep_connected()
             self._drain()
             if self._pending:
                 return self._pending.popleft()[1]
@@ -491,3 +362,35 @@ class Subscriber(_Socket):
                     del self._pending[i]
                     self.dropped += 1
                     break
+
+
+class Tap(_Socket):
+    """A SUB socket for tools that stamp and count each message as it comes off the socket
+    (``hz``, ``record``): ``prefixes`` are ZeroMQ's own topic filters (empty: every topic; no
+    exact match, no keep-newest), ``rcvhwm`` a deep receive queue. Read ``socket`` directly
+    and call `keep_connected` between reads. ``curve`` and ``watch`` as for `Subscriber`."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        prefixes: Sequence[bytes] = (),
+        bind: bool = False,
+        context: zmq.Context | None = None,
+        *,
+        rcvhwm: int = 10_000,
+        curve: CurveKeys | None = None,
+        watch: Callable[[str], None] | None = None,
+    ) -> None:
+        super().__init__(zmq.SUB, context)
+        try:
+            self.socket.setsockopt(zmq.RCVHWM, rcvhwm)
+            for prefix in sorted(prefixes) or [b""]:
+                self.socket.setsockopt(zmq.SUBSCRIBE, prefix)
+            self._setup_curve(curve, bind)
+            self._attach(endpoint, bind, watch)
+        except BaseException:
+            self._fail_init()
+            raise
+
+    def __enter__(self) -> Tap:
+        return self

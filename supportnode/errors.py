@@ -34,6 +34,11 @@ class ProtocolError(SupportNodeError):
         return (type(self), (str(self), self.reason))
 
 
+class BusError(SupportNodeError):
+    """A socket cannot bind or connect to an endpoint (bad address, address in use), or its
+    CURVE keys cannot be used (missing or unreadable key file)."""
+
+
 class AlignmentError(SupportNodeError):
     """Gravity alignment cannot be estimated from the cloud (e.g. no horizontal surface in view)."""
 

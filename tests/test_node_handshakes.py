@@ -20,7 +20,7 @@ import pytest
 import zmq
 from test_node_hostile import frames, scene
 
-from supportnode.bus import CurveKeys, Publisher, Subscriber
+from supportnode.bus import BusError, CurveKeys, Publisher, Subscriber
 from supportnode.msgs import SupportSurfaces, decode_any
 from supportnode.node.node import Node
 from supportnode.params import DetectParams
@@ -64,7 +64,20 @@ def _driver(keys, endpoint: str, node_binds: bool, curve: bool, pair: str = "dri
         ck = CurveKeys(made / f"{pair}.key_secret", server_key=made / "node.key")
     elif curve:
         ck = CurveKeys(made / f"{pair}.key_secret", authorized_dir=keys["trusts_node"])
-    return Publisher(endpoint, bind=not node_binds, curve=ck, hwm=1000)
+    return _publisher(endpoint, bind=not node_binds, curve=ck)
+
+
+def _publisher(endpoint: str, bind: bool = True, curve: CurveKeys | None = None) -> Publisher:
+    """A Publisher; binding retries for 2 s: libzmq frees the port of the previous driver,
+    just closed, asynchronously."""
+    deadline = time.monotonic() + 2.0
+    while True:
+        try:
+            return Publisher(endpoint, bind=bind, curve=curve, hwm=1000)
+        except BusError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
 
 
 @contextlib.contextmanager
@@ -165,7 +178,7 @@ def test_node_refused_by_its_driver_reconnects_once_the_driver_accepts_it(keys, 
     made = keys["made"]
     with _node(keys, endpoint, False, True) as sub:
         refusing = CurveKeys(made / "driver.key_secret", authorized_dir=nobody)
-        with Publisher(endpoint, curve=refusing, hwm=1000) as driver:
+        with _publisher(endpoint, curve=refusing) as driver:
             assert not _heard(driver, sub, 1.0)
             assert _counter(sub, "handshake_failures_scans_auth", 1) >= 1
         with _driver(keys, endpoint, False, True) as driver:

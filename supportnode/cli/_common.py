@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 
 def add_config_arguments(parser: argparse.ArgumentParser, example: str) -> None:
@@ -57,3 +58,62 @@ def int_at_least(low: int):
         return value
 
     return parse
+
+
+def add_curve_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--curve-key``, ``--curve-server-key`` (repeatable: one per endpoint, or one for all)
+    and ``--curve-authorized``: CURVE keys of the command's sockets (see supportnode.curve)."""
+    g = parser.add_argument_group("CURVE security (a node with node.curve_enabled)")
+    g.add_argument(
+        "--curve-key",
+        metavar="FILE.key_secret",
+        help="this side's key pair (supportnode keys); with it the sockets use CURVE",
+    )
+    g.add_argument(
+        "--curve-server-key",
+        action="append",
+        default=[],
+        metavar="FILE.key",
+        help="public key of the server we connect to (the node's server.key; for the node's "
+        "scan endpoint, the driver's): once for every endpoint, or once per --endpoint",
+    )
+    g.add_argument(
+        "--curve-authorized",
+        metavar="DIR",
+        help="when binding: folder of the public keys (*.key) of the clients to accept",
+    )
+
+
+def curve_keys(args: argparse.Namespace, bind: bool, index: int = 0) -> Any:
+    """The `supportnode.curve.CurveKeys` of the ``index``-th endpoint from the CURVE options,
+    or None without ``--curve-key``; a one-line error for options that do not fit together."""
+    from supportnode.curve import CurveKeys
+    from supportnode.errors import BusError
+
+    servers = args.curve_server_key
+    if not args.curve_key:
+        if servers or args.curve_authorized:
+            raise BusError("--curve-server-key and --curve-authorized need --curve-key")
+        return None
+    if bind:
+        if not args.curve_authorized:
+            raise BusError("binding with --curve-key needs --curve-authorized DIR")
+        return CurveKeys(args.curve_key, authorized_dir=args.curve_authorized)
+    if not servers:
+        raise BusError("connecting with --curve-key needs --curve-server-key FILE.key")
+    if len(servers) > 1 and index >= len(servers):
+        raise BusError(
+            f"{len(servers)} --curve-server-key for more endpoints: give one for all, "
+            "or one per endpoint in order"
+        )
+    return CurveKeys(args.curve_key, server_key=servers[index if len(servers) > 1 else 0])
+
+
+def handshake_report(command: str) -> Any:
+    """A report for `supportnode.bus` ``watch=``: why a socket hears nothing, on stderr."""
+    import sys
+
+    def report(line: str) -> None:
+        print(f"supportnode {command}: {line}", file=sys.stderr, flush=True)
+
+    return report

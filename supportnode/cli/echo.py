@@ -16,7 +16,13 @@ from typing import Any
 # numpy only: this module is imported just when `echo` runs (see supportnode.cli.build_parser).
 import numpy as np
 
-from supportnode.cli._common import int_at_least, positive_seconds
+from supportnode.cli._common import (
+    add_curve_arguments,
+    curve_keys,
+    handshake_report,
+    int_at_least,
+    positive_seconds,
+)
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 # Messages kept when printing falls behind (a slow terminal); older ones are dropped.
@@ -40,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="stop after S seconds without a message (default: wait forever)",
     )
+    add_curve_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
             keep_newest=_KEEP_NEWEST,
             max_message_bytes=limits.max_message_bytes,
             rcvhwm=64,
+            curve=curve_keys(args, bind=False),
+            watch=handshake_report("echo"),  # says why nothing comes from a CURVE node
         ) as sub:
             oversized = 0
             while args.count is None or shown < args.count:

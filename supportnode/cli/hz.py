@@ -15,7 +15,13 @@ import itertools
 import math
 from collections.abc import Sequence
 
-from supportnode.cli._common import int_at_least, positive_seconds
+from supportnode.cli._common import (
+    add_curve_arguments,
+    curve_keys,
+    handshake_report,
+    int_at_least,
+    positive_seconds,
+)
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 # Messages ZeroMQ may queue for us: deep enough that a busy moment never drops anything.
@@ -42,6 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="stop after S seconds (default: until Ctrl-C)",
     )
+    add_curve_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,18 +60,16 @@ def run(args: argparse.Namespace) -> int:
 
     from supportnode import bus
 
-    bus.check_endpoint(args.endpoint)
     topic = args.topic.encode()
-    sock = zmq.Context.instance().socket(zmq.SUB)
+    tap = bus.Tap(
+        args.endpoint,
+        [topic],
+        rcvhwm=_RCVHWM,
+        curve=curve_keys(args, bind=False),
+        watch=handshake_report("hz"),  # says why nothing comes from a CURVE node
+    )
+    sock = tap.socket
     try:
-        sock.setsockopt(zmq.LINGER, 0)
-        sock.setsockopt(zmq.RCVHWM, _RCVHWM)
-        sock.setsockopt(zmq.SUBSCRIBE, topic)
-        try:
-            sock.connect(args.endpoint)
-        except zmq.ZMQError as err:
-            raise bus.BusError(f"{args.endpoint}: cannot connect ({err.strerror})") from err
-
         arrivals: collections.deque[float] = collections.deque(maxlen=args.window)
         sizes: collections.deque[int] = collections.deque(maxlen=args.window)
         start = time.monotonic()
@@ -85,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
                     next_report = now + 1.0
                 continue
             wake = next_report if end is None else min(next_report, end)
+            tap.keep_connected()
             if not sock.poll(max(1, math.ceil((wake - now) * 1000)), zmq.POLLIN):
                 continue
             while True:  # everything that has arrived, each stamped as it is taken
@@ -102,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        sock.close(linger=0)
+        tap.close()
     print(f"total {total} messages", file=sys.stderr, flush=True)
     return 0
 

@@ -14,7 +14,12 @@ import queue
 import threading
 from typing import Any
 
-from supportnode.cli._common import add_config_arguments
+from supportnode.cli._common import (
+    add_config_arguments,
+    add_curve_arguments,
+    curve_keys,
+    handshake_report,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,6 +78,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress, only the summary")
     add_config_arguments(parser, "node.scan_endpoint=tcp://127.0.0.1:6000")
+    add_curve_arguments(parser)
 
 
 def _positive(text: str) -> float:
@@ -142,7 +148,13 @@ class Player:
 
         args = self.args
         items, reader = self._start_reader()
-        pub = Publisher(endpoint, bind=bind, hwm=args.hwm)
+        pub = Publisher(
+            endpoint,
+            bind=bind,
+            hwm=args.hwm,
+            curve=curve_keys(args, bind),
+            watch=handshake_report("play"),
+        )
         finished = False
         try:
             if not args.quiet:

@@ -13,8 +13,14 @@ clouds are written (converted) at their source times, e.g. to turn a bag into ou
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
-from supportnode.cli._common import add_config_arguments
+from supportnode.cli._common import (
+    add_config_arguments,
+    add_curve_arguments,
+    curve_keys,
+    handshake_report,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -68,6 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="print only the summary and errors")
     add_config_arguments(parser, "node.scan_endpoint=tcp://127.0.0.1:6000")
+    add_curve_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -139,20 +146,24 @@ class _Stats:
         import time
 
         self.started = time.monotonic()
-        self.dropped = 0  # sequence gaps: lost before they reached us
-        self.restarts = 0  # sequence went backwards: a publisher restarted
         self.rejected = 0  # not supportnode messages
         self.last_error = ""
-        self.last_seq: dict[str, int] = {}
+        self.seqs: dict[str, Any] = {}  # topic -> SeqCounter
 
     def seq(self, topic: str, seq: int) -> None:
-        last = self.last_seq.get(topic)
-        if last is not None:
-            if seq > last + 1:
-                self.dropped += seq - last - 1
-            elif seq <= last:
-                self.restarts += 1
-        self.last_seq[topic] = seq
+        from supportnode.msgs import SeqCounter
+
+        self.seqs.setdefault(topic, SeqCounter()).observe(seq)
+
+    @property
+    def dropped(self) -> int:
+        """Sequence gaps: lost before they reached us."""
+        return sum(c.gaps for c in self.seqs.values())
+
+    @property
+    def restarts(self) -> int:
+        """Sequences that went back or jumped far: a publisher restarted."""
+        return sum(c.restarts for c in self.seqs.values())
 
     def summary(self, w: object) -> str:
         import time
@@ -187,30 +198,31 @@ def _record(
 
     import zmq
 
-    from supportnode.bus import BusError, check_endpoint
-    from supportnode.errors import ProtocolError
+    from supportnode.bus import Tap
     from supportnode.io.recording import RecordingWriter
-    from supportnode.msgs import peek_header
 
     assert isinstance(w, RecordingWriter)
     ctx = zmq.Context()
-    sock = ctx.socket(zmq.SUB)
-    sock.setsockopt(zmq.LINGER, 0)
-    # Deep receive queue: ZeroMQ's I/O thread keeps receiving while we compress a chunk.
-    sock.setsockopt(zmq.RCVHWM, max(1, args.queue))
     topics = {t.encode() for t in args.topics}
-    for t in sorted(topics) or [b""]:
-        sock.setsockopt(zmq.SUBSCRIBE, t)
     stats = _Stats()
+    taps: list[Tap] = []
+    poller = zmq.Poller()
     try:
-        for ep in endpoints:
-            check_endpoint(ep)
-            try:
-                sock.bind(ep) if args.bind else sock.connect(ep)
-            except zmq.ZMQError as err:
-                raise BusError(
-                    f"{ep}: cannot {'bind' if args.bind else 'connect'} ({err.strerror})"
-                ) from err
+        for i, ep in enumerate(endpoints):
+            # Deep receive queue: ZeroMQ's I/O thread keeps receiving while we compress a
+            # chunk. A socket per endpoint: each may have its own CURVE server key.
+            taps.append(
+                Tap(
+                    ep,
+                    sorted(topics),
+                    bind=args.bind,
+                    context=ctx,
+                    rcvhwm=max(1, args.queue),
+                    curve=curve_keys(args, args.bind, i),
+                    watch=handshake_report("record"),
+                )
+            )
+            poller.register(taps[-1].socket, zmq.POLLIN)
         if not args.quiet:
             what = ", ".join(args.topics) or "all topics"
             print(
@@ -225,32 +237,47 @@ def _record(
             if deadline is not None and time.monotonic() >= deadline:
                 break
             w.tick()
-            if not sock.poll(100, zmq.POLLIN):
-                continue
-            for _ in range(10_000):  # drain what has arrived, then look at the clock again
-                try:
-                    parts = sock.recv_multipart(zmq.NOBLOCK, copy=False)
-                except zmq.Again:
-                    break
-                received = time.time()
-                topic = parts[0].bytes
-                if topics and topic not in topics:
-                    continue  # a prefix match (scan2 for scan)
-                frames = [topic, *(p.buffer for p in parts[1:])]
-                try:
-                    header = peek_header(frames, w.limits)
-                except ProtocolError as err:
-                    stats.rejected += 1
-                    stats.last_error = str(err)
-                    continue
-                w.write(frames, received, header)
-                stats.seq(header.topic, header.seq)
+            for tap in taps:
+                tap.keep_connected()
+            for sock, _ in poller.poll(100):
+                _drain(sock, topics, w, stats)
             if tty and time.monotonic() >= next_progress:
                 next_progress += 1.0
                 print(f"\r{stats.summary(w)}", end="", file=sys.stderr, flush=True)
         if tty:
             print(file=sys.stderr)
     finally:
-        sock.close(linger=0)
+        for tap in taps:
+            tap.close()
         ctx.term()
     return stats
+
+
+def _drain(sock: object, topics: set[bytes], w: object, stats: _Stats) -> None:
+    """Write what has arrived on ``sock`` (at most 10,000 messages: then the clock again)."""
+    import time
+
+    import zmq
+
+    from supportnode.errors import ProtocolError
+    from supportnode.msgs import peek_header
+
+    assert isinstance(sock, zmq.Socket)
+    for _ in range(10_000):
+        try:
+            parts = sock.recv_multipart(zmq.NOBLOCK, copy=False)
+        except zmq.Again:
+            return
+        received = time.time()
+        topic = parts[0].bytes
+        if topics and topic not in topics:
+            continue  # a prefix match (scan2 for scan)
+        frames = [topic, *(p.buffer for p in parts[1:])]
+        try:
+            header = peek_header(frames, w.limits)  # type: ignore[attr-defined]
+        except ProtocolError as err:
+            stats.rejected += 1
+            stats.last_error = str(err)
+            continue
+        w.write(frames, received, header)  # type: ignore[attr-defined]
+        stats.seq(header.topic, header.seq)

@@ -18,7 +18,13 @@ import sys
 import threading
 from typing import Any
 
-from supportnode.cli._common import positive_number, positive_seconds
+from supportnode.cli._common import (
+    add_curve_arguments,
+    curve_keys,
+    handshake_report,
+    positive_number,
+    positive_seconds,
+)
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_SCAN_ENDPOINT = "tcp://127.0.0.1:5555"
@@ -83,6 +89,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=positive_seconds, metavar="S", help="stop after S seconds"
     )
     parser.add_argument("--quiet", action="store_true", help="print only errors")
+    add_curve_arguments(parser)  # --curve-server-key: results' (node), then scans' (driver)
 
 
 def _port(text: str) -> int:
@@ -209,8 +216,9 @@ def _live(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels
     receivers: list[Receiver] = []
     deadline = None if args.duration is None else time.monotonic() + args.duration
     try:
-        for endpoint, topics, keep in wanted:
-            receivers.append(Receiver(endpoint, topics, keep, inbox, stop))
+        for i, (endpoint, topics, keep) in enumerate(wanted):
+            curve = curve_keys(args, bind=False, index=i)
+            receivers.append(Receiver(endpoint, topics, keep, inbox, stop, curve))
             receivers[-1].start()
         while not stop.is_set():
             if deadline is not None and time.monotonic() >= deadline:
@@ -242,6 +250,7 @@ class Receiver(threading.Thread):
         keep_newest: int,
         inbox: Any,
         stop: threading.Event,
+        curve: Any = None,
     ) -> None:
         from supportnode import bus
         from supportnode.msgs import Limits
@@ -253,6 +262,8 @@ class Receiver(threading.Thread):
             topics,
             keep_newest=keep_newest,
             max_message_bytes=self.limits.max_message_bytes,
+            curve=curve,
+            watch=handshake_report("view"),
         )
         self.inbox, self.stop = inbox, stop
         self.rejected = 0

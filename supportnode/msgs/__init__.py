@@ -29,10 +29,12 @@ from supportnode.msgs.results import (
     SupportSurface,
     SupportSurfaces,
 )
+from supportnode.msgs.sequence import MAX_SEQ_GAP, SeqCounter
 
 __all__ = [
     "DTYPES",
     "LEVELS",
+    "MAX_SEQ_GAP",
     "MESSAGE_TYPES",
     "SCHEMA_VERSION",
     "BufferSpec",
@@ -45,6 +47,7 @@ __all__ = [
     "ObstacleClusters",
     "PointCloud",
     "Pose",
+    "SeqCounter",
     "SupportSurface",
     "SupportSurfaces",
     "decode_any",

@@ -6,8 +6,8 @@ that waits there. A message is rejected under exactly one reason (`REASONS`, doc
 docs/protocol.md section 9): the first check it fails, in this order: decoding (the wire
 protocol's own reasons), message type, the scan's content (`scan_problem`: no points, no finite
 point, a pose or points beyond the map's coordinates), then its stamp against the stream's
-timeline (`StampGate`). ``seq`` is looked at for every decoded scan (`SeqCounter`) but never
-rejects one: it is the sender's count, and only says how many messages were lost on the way.
+timeline (`StampGate`). ``seq`` is looked at for every decoded scan
+(`supportnode.msgs.SeqCounter`) but never rejects one: it is the sender's count, and only says how many messages were lost on the way.
 
 Pure bookkeeping: frames in, a PointCloud or a `Reject` out; no sockets, threads or logging.
 Owned by the receiving thread.
@@ -23,17 +23,15 @@ import numpy as np
 
 from supportnode.errors import ProtocolError
 from supportnode.geometry.transform import quaternion_matrix
-from supportnode.msgs import Limits, PointCloud, decode_any
+from supportnode.msgs import Limits, PointCloud, SeqCounter, decode_any
 from supportnode.node.map import coordinate_range
 from supportnode.params import NodeParams
 
 __all__ = [
     "BACKWARD_S",
-    "MAX_SEQ_GAP",
     "REASONS",
     "Intake",
     "Reject",
-    "SeqCounter",
     "StampGate",
     "scan_problem",
 ]
@@ -59,8 +57,6 @@ REASONS: dict[str, str] = {
 }
 #: A stamp this much before the previous one is backwards, s (jitter of a few us is not).
 BACKWARD_S = 1e-3
-#: A seq jump larger than this is a restart or a wrap of the sender's counter, not lost scans.
-MAX_SEQ_GAP = 1_000_000
 # Scans in a row on a new timeline that make it the stream's: the first is rejected, the
 # second confirms. One message alone never moves the timeline.
 _CONFIRM_SCANS = 2
@@ -108,28 +104,6 @@ def _extent(cloud: PointCloud) -> tuple[np.ndarray, np.ndarray]:
 
 def _limit(limit: np.ndarray) -> str:
     return f"+-{limit[0]:.0f} m in x, y and +-{limit[2]:.0f} m in z"
-
-
-class SeqCounter:
-    """Missed scans from the sender's ``seq``: a step of k > 1 means k - 1 lost on the way.
-    A jump beyond `MAX_SEQ_GAP`, or back (including a repeat), is a restart or a wrap of the
-    sender's counter (any uint64 is a valid seq): counted as such, not as lost scans. Both
-    counts grow by at most MAX_SEQ_GAP a message, so they stay far inside int64."""
-
-    def __init__(self) -> None:
-        self.gaps = 0
-        self.restarts = 0
-        self._last: int | None = None
-
-    def observe(self, seq: int) -> None:
-        last, self._last = self._last, int(seq)
-        if last is None:
-            return
-        step = int(seq) - last
-        if 1 < step <= MAX_SEQ_GAP + 1:
-            self.gaps += step - 1
-        elif step > MAX_SEQ_GAP + 1 or step <= 0:
-            self.restarts += 1
 
 
 class StampGate:
