@@ -89,6 +89,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=positive_seconds, metavar="S", help="stop after S seconds"
     )
     parser.add_argument("--quiet", action="store_true", help="print only errors")
+    parser.add_argument(
+        "--allow-origin",
+        action="append",
+        default=[],
+        metavar="ORIGIN",
+        help="also accept viewers from this web origin, e.g. https://studio.example.com "
+        "(repeatable; '*': any). Default: the Foxglove app, localhost, the desktop app",
+    )
     add_curve_arguments(parser)  # --curve-server-key: results' (node), then scans' (driver)
 
 
@@ -125,6 +133,10 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+
+
+def _warn(text: str) -> None:
+    print(f"supportnode view: warning: {text}", file=sys.stderr, flush=True)
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -188,11 +200,18 @@ def _serve(args: argparse.Namespace, stop: threading.Event) -> int:
     from supportnode.view.sink import Channels, serve
 
     ctx = foxglove.Context()
-    server = serve(ctx, args.host, args.port)
+    server = serve(ctx, args.host, args.port, args.allow_origin, _warn)
     channels = Channels(ctx)
     try:
-        ws = f"ws://{args.host}:{server.port}"
-        _say(args, f"open {server.app_url()}  (or connect Foxglove to {ws})")
+        _say(
+            args,
+            f"open {server.app_url(args.host)}  (or connect Foxglove to {server.ws_url(args.host)})",
+        )
+        if server.exposed:
+            _warn(
+                "every port browsers cannot reach is in use: the Foxglove server listens on "
+                f"127.0.0.1:{server.server.port}, where the origin check can be bypassed"
+            )
         bridge = Bridge(map_frame=args.map_frame)
         if args.source is None:
             _live(args, stop, bridge, channels)

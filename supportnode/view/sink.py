@@ -3,6 +3,7 @@ and the two sinks of such a context, a WebSocket server (live) or an MCAP file (
 
     ctx = foxglove.Context()
     server = serve(ctx, "127.0.0.1", 8765)        # or: writer = write_mcap(ctx, "out.mcap")
+                                                  # (behind an Origin check: view.origins)
     channels = Channels(ctx)
     channels.log(bridge.convert(msg, topic), log_time_ns)
 
@@ -12,7 +13,7 @@ A private context (not the SDK's global one) keeps several views, and tests, apa
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 import foxglove
@@ -20,8 +21,9 @@ import foxglove.channels
 
 from supportnode.view import ViewError
 from supportnode.view.foxglove_bridge import DIAGNOSTICS_SCHEMA, Item
+from supportnode.view.origins import HIDDEN_PORTS, OriginRelay
 
-__all__ = ["Channels", "serve", "write_mcap"]
+__all__ = ["Channels", "ViewServer", "serve", "write_mcap"]
 
 
 class Channels:
@@ -67,13 +69,58 @@ class Channels:
         self._channels.clear()
 
 
-def serve(context: foxglove.Context, host: str, port: int) -> Any:
-    """A Foxglove WebSocket server for ``context`` on ``host:port`` (port 0: a free one; the
-    actual port is ``server.port``). Raises ViewError when it cannot listen."""
+class ViewServer:
+    """The Foxglove WebSocket server behind its origin check (`supportnode.view.origins`):
+    ``port`` is where viewers connect; ``exposed`` says the Foxglove server had to take a port
+    that browsers can reach directly (every hidden port in use)."""
+
+    def __init__(self, server: Any, relay: OriginRelay, exposed: bool) -> None:
+        self.server, self.relay, self.exposed = server, relay, exposed
+        self.port = relay.port
+
+    def app_url(self, host: str) -> str:
+        """The Foxglove web app's link that opens this server."""
+        from urllib.parse import quote
+
+        return f"https://app.foxglove.dev?ds=foxglove-websocket&ds.url={quote(self.ws_url(host), safe='')}"
+
+    def ws_url(self, host: str) -> str:
+        return f"ws://{host}:{self.port}"
+
+    def stop(self) -> None:
+        self.relay.close()
+        self.server.stop()
+
+
+def serve(
+    context: foxglove.Context,
+    host: str,
+    port: int,
+    allow_origins: Sequence[str] = (),
+    report: Callable[[str], None] | None = None,
+) -> ViewServer:
+    """A Foxglove WebSocket server for ``context``, reached on ``host:port`` (port 0: a free
+    one; the actual port is ``.port``) through the origin check: allowed origins as
+    `origin_allowed` says, plus ``allow_origins``; ``report`` gets a line per refused origin.
+    Raises ViewError when it cannot listen."""
+    server, exposed = None, False
+    for hidden in (*HIDDEN_PORTS, 0):
+        try:
+            server = foxglove.start_server(
+                name="supportnode", host="127.0.0.1", port=hidden, context=context
+            )
+            exposed = hidden == 0
+            break
+        except RuntimeError as err:  # the SDK's FoxgloveError, e.g. address in use
+            if hidden == 0:
+                raise ViewError(f"cannot start the Foxglove server: {err}") from err
+    assert server is not None
     try:
-        return foxglove.start_server(name="supportnode", host=host, port=port, context=context)
-    except RuntimeError as err:  # the SDK's FoxgloveError, e.g. address in use
-        raise ViewError(f"cannot serve on {host}:{port}: {err}") from err
+        relay = OriginRelay(host, port, ("127.0.0.1", server.port), allow_origins, report)
+    except OSError as err:
+        server.stop()
+        raise ViewError(f"cannot serve on {host}:{port}: {err.strerror or err}") from err
+    return ViewServer(server, relay, exposed)
 
 
 def write_mcap(context: foxglove.Context, path: str | os.PathLike[str]) -> Any:
