@@ -172,7 +172,8 @@ class HandshakeWatch:
             "peer another: configure both sides alike, e.g. both with CURVE keys)",
             "auth": "its key was refused (not among the authorised public keys)",
             "protocol": "the peer does not speak ZMTP",
-            "other": "the peer closed it (with CURVE: a server key that does not match?)",
+            "other": "the peer closed the connection"
+            + (" (a server key that does not match?)" if self._ours == "CURVE" else ""),
         }[kind]
         then = "; reconnecting" if again else ""
         self._report(

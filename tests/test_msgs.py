@@ -933,3 +933,21 @@ def test_worked_example_in_docs_matches_the_encoder():
         fields={"intensity": np.array([10, 200, 255], np.uint8)},
     )
     assert [bytes(f) for f in frames] == wire(msg.encode("scan"))
+
+
+def test_hostile_catalogue_is_rejected_under_its_reasons():
+    """`supportnode.msgs.hostile`: every message of a wire-level reason is rejected under it
+    (the node-level ones decode: the node's intake rejects them, see test_node_hostile)."""
+    from supportnode.msgs.hostile import rejects
+
+    limits = Limits(max_points=1000, max_message_bytes=100_000)
+    pts = np.random.default_rng(0).uniform(-1, 1, (500, 3))
+    node_level = {"wrong_type", "empty", "all_nonfinite", "out_of_range", "stamp_jump"}
+    for reason, messages in rejects(pts, 10.0, limits).items():
+        for frames in messages:
+            if reason in node_level:
+                decode_any(frames, limits)
+                continue
+            with pytest.raises(ProtocolError) as info:
+                decode_any(frames, limits)
+            assert info.value.reason == reason, str(info.value)
