@@ -15,7 +15,7 @@ Owned by the receiving thread.
 
 from __future__ import annotations
 
-import math
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -51,15 +51,17 @@ REASONS: dict[str, str] = {
     "out_of_range": "a pose translation, or points through the pose, beyond the map's "
     "coordinate range (about +-105 km in x, y and +-13 km in z at 5 cm voxels)",
     "stamp_jump": "a stamp that leaves the stream's timeline (more than node.max_stamp_jump "
-    "ahead, or backwards) and that no following scan confirms yet",
+    "ahead, or backwards) while the old timeline goes on, or before a second scan on it",
     "unusable": "a scan the map or detection refused (should not happen once admitted)",
     "internal_error": "a bug met while handling the message (logged with its traceback)",
 }
 #: A stamp this much before the previous one is backwards, s (jitter of a few us is not).
 BACKWARD_S = 1e-3
-# Scans in a row on a new timeline that make it the stream's: the first is rejected, the
-# second confirms. One message alone never moves the timeline.
+# A new timeline becomes the stream's when this many scans in a row follow it and the old one
+# has been silent this long (receive time): a source that restarted stops its old timeline,
+# a hostile or second sender among the real one does not.
 _CONFIRM_SCANS = 2
+_SILENCE_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -109,37 +111,42 @@ def _limit(limit: np.ndarray) -> str:
 class StampGate:
     """The stream's timeline: a scan more than ``max_jump`` seconds ahead of the last admitted
     one, or more than `BACKWARD_S` behind it, is rejected, unless it continues a new timeline
-    that the previous rejected scan began (each within ``max_jump`` of the one before, none
-    backwards). That is how a source that really restarted (a driver or replay started again:
-    every scan after it on the new timeline) is told from one bad stamp (a far-future one, or
-    stamps alternating between two clocks): the first needs two scans in a row, and gets its
-    map reset by the node when the new timeline lies behind; the second never gets in."""
+    that the rejected scans before it began (each within ``max_jump`` of the one before, none
+    backwards) and the old timeline has gone quiet. That is how a source that really restarted
+    (a driver or replay started again: its old timeline stops, every scan after is on the new
+    one) is told from bad stamps among good ones (a far-future one, a burst of them, stamps
+    alternating between two clocks): the first needs `_CONFIRM_SCANS` scans in a row on the
+    new timeline and `_SILENCE_S` without a scan on the old one, and gets its map reset by the
+    node when the new timeline lies behind; the second never gets in, as long as the real
+    source keeps sending."""
 
     def __init__(self, max_jump: float) -> None:
         self.max_jump = float(max_jump)
         self.restarts = 0  # new timelines confirmed
         self._last: float | None = None
+        self._last_at = 0.0  # receive time (monotonic) of the last admitted scan
         self._candidate: tuple[float, int] | None = None  # (last stamp, scans) of a new one
 
     def _follows(self, stamp: float, last: float) -> bool:
         return -BACKWARD_S <= stamp - last <= self.max_jump
 
-    def admit(self, stamp: float) -> str | None:
-        """None when ``stamp`` is admitted (the timeline moves to it), else why not."""
+    def admit(self, stamp: float, now: float) -> str | None:
+        """None when ``stamp`` is admitted (the timeline moves to it), else why not.
+        now: receive time, s (monotonic)."""
         if self._last is None or self._follows(stamp, self._last):
-            self._last, self._candidate = stamp, None
+            self._last, self._last_at, self._candidate = stamp, now, None
             return None
         c = self._candidate
         scans = c[1] + 1 if c is not None and self._follows(stamp, c[0]) else 1
-        if scans >= _CONFIRM_SCANS:
-            self._last, self._candidate = stamp, None
+        if scans >= _CONFIRM_SCANS and now - self._last_at >= _SILENCE_S:
+            self._last, self._last_at, self._candidate = stamp, now, None
             self.restarts += 1
             return None
         self._candidate = (stamp, scans)
         return (
             f"stamp {stamp:.6f} is {stamp - self._last:+.6g} s from the previous scan's "
             f"(node.max_stamp_jump {self.max_jump:g} s; a new timeline needs "
-            f"{_CONFIRM_SCANS} scans in a row)"
+            f"{_CONFIRM_SCANS} scans in a row and {_SILENCE_S:g} s without the old one)"
         )
 
 
@@ -166,7 +173,7 @@ class Intake:
         problem = scan_problem(msg, self.limit)
         if problem is not None:
             return Reject(problem.reason, f"scan seq {msg.seq}: {problem.text}")
-        why = self.stamps.admit(msg.stamp) if math.isfinite(msg.stamp) else "stamp not finite"
+        why = self.stamps.admit(msg.stamp, time.monotonic())
         if why is not None:
             return Reject("stamp_jump", f"scan seq {msg.seq}: {why}")
         return msg
