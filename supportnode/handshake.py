@@ -51,7 +51,11 @@ _POLL_MS = 100
 # A binding socket reads a peer's address from the accepted connection; a peer refused within
 # microseconds (a mechanism mismatch) may be gone before the watcher thread gets to it.
 _GONE = "a peer (address gone before it could be read)"
-_MECHANISMS = {zmq.NULL: "no security (plain)", zmq.PLAIN: "PLAIN", zmq.CURVE: "CURVE"}
+_MECHANISMS: dict[int, str] = {
+    int(zmq.NULL): "no security (plain)",
+    int(zmq.PLAIN): "PLAIN",
+    int(zmq.CURVE): "CURVE",
+}
 
 
 def _remote_address(fd: int) -> str | None:
@@ -86,7 +90,7 @@ class HandshakeWatch:
     ) -> None:
         self.endpoint, self.name, self.connects = endpoint, name, connects
         self._report = report
-        self._ours = _MECHANISMS.get(sock.getsockopt(zmq.MECHANISM), "another mechanism")
+        self._ours = _MECHANISMS.get(int(sock.getsockopt(zmq.MECHANISM)), "another mechanism")
         self._lock = threading.Lock()
         self._failures: collections.Counter[str] = collections.Counter()
         self._reported: set[tuple[str, str]] = set()
