@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from bench_node import SOURCE, _cloud, _free_port, scene_by_name
 
-from supportnode.bus import BusError, CurveKeys, Publisher
+from supportnode.bus import CurveKeys, publisher_when_free
 from supportnode.client import Diagnostics, Subscriber, SupportSurfaces
 from supportnode.msgs import Limits, PointCloud
 from supportnode.msgs.hostile import rejects
@@ -63,7 +63,7 @@ class Node:
             env={**os.environ, "PYTHONPATH": SOURCE},
             stderr=self.log,
         )
-        self.pub = bind(self.scan_ep)
+        self.pub = publisher_when_free(self.scan_ep, hwm=1000)
         self.sub = Subscriber(["surfaces", "diagnostics"], pub_ep, keep_newest=1000)
         self.results: dict[float, float] = {}  # stamp -> latency, s
         self.diagnostics: list[tuple[float, Diagnostics]] = []
@@ -93,18 +93,6 @@ class Node:
         self.proc.wait(10)
         self.log.seek(0)
         return self.log.read()
-
-
-def bind(endpoint: str, curve: CurveKeys | None = None) -> Publisher:
-    """A driver's publisher; retries while libzmq frees the previous driver's port."""
-    deadline = time.monotonic() + 5.0
-    while True:
-        try:
-            return Publisher(endpoint, curve=curve, hwm=1000)
-        except BusError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
 
 
 def rss(d: Diagnostics) -> float:
@@ -221,13 +209,13 @@ def restarts(node: Node, clouds, count: int, rng: np.random.Generator) -> dict:
     for r in range(count):
         node.pub.close()
         if r % 2:
-            with bind(node.scan_ep, curve) as wrong:
+            with publisher_when_free(node.scan_ep, curve=curve, hwm=1000) as wrong:
                 for _ in range(10):
                     wrong.send(clouds[0].encode("scan"))
                     time.sleep(0.1)
         if r % 3 == 2:
             back += 3600.0  # stamps an hour back: the source started over
-        node.pub = bind(node.scan_ep)
+        node.pub = publisher_when_free(node.scan_ep, hwm=1000)
         t = time.monotonic()
         while True:
             stamp = time.time() - back

@@ -57,6 +57,7 @@ __all__ = [
     "Subscriber",
     "Tap",
     "check_endpoint",
+    "publisher_when_free",
 ]
 
 #: One multipart message: ``[topic, *payload]``. Received payload frames are zero-copy views.
@@ -215,6 +216,20 @@ class Publisher(_Socket):
             raise ValueError("a message needs at least a topic frame")
         self.keep_connected()
         self.socket.send_multipart(list(frames), copy=False)
+
+
+def publisher_when_free(endpoint: str, wait_s: float = 2.0, **kw: Any) -> Publisher:
+    """A `Publisher` binding ``endpoint``, retried for ``wait_s`` while the address is in use:
+    libzmq frees a closed socket's port asynchronously, so a driver restarted at once may find
+    its port still taken for a moment. ``kw``: as for Publisher."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            return Publisher(endpoint, bind=True, **kw)
+        except BusError as err:
+            if "address already in use" not in str(err) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
 
 
 class Subscriber(_Socket):

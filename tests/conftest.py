@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shutil
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -57,3 +59,35 @@ def real_scans():
     if not REAL_SCANS.is_dir():
         pytest.skip("../shared/real_scans is not beside the repo")
     return REAL_SCANS
+
+
+def free_port() -> int:
+    """A TCP port of 127.0.0.1 free now (another process may take it before it is used)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def node_keys(tmp_path: Path) -> dict[str, Path]:
+    """CURVE key pairs (node, driver, client, stranger) in ``made``; the node's key folder in
+    its layout (supportnode.curve): the node's pair, the driver as scan server, the client in
+    subscribers/, the driver in drivers/; ``trusts_node``: a binding driver's authorised
+    clients (the node's public key)."""
+    import zmq.auth
+
+    made = tmp_path / "made"
+    made.mkdir()
+    for name in ("node", "driver", "client", "stranger"):
+        zmq.auth.create_certificates(made, name)
+    folder = tmp_path / "node"
+    for sub in ("subscribers", "drivers"):
+        (folder / sub).mkdir(parents=True)
+    shutil.copy(made / "node.key_secret", folder / "server.key_secret")
+    shutil.copy(made / "driver.key", folder / "scan_server.key")
+    shutil.copy(made / "client.key", folder / "subscribers" / "client.key")
+    shutil.copy(made / "driver.key", folder / "drivers" / "driver.key")
+    trusts_node = tmp_path / "trusts_node"
+    trusts_node.mkdir()
+    shutil.copy(made / "node.key", trusts_node / "node.key")
+    return {"made": made, "folder": folder, "trusts_node": trusts_node}

@@ -6,15 +6,12 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import shutil
-import socket
 import threading
 import time
-from pathlib import Path
 
 import pytest
 import zmq
-from conftest import REPO
+from conftest import REPO, free_port
 
 from supportnode.cli import main
 from supportnode.io.recording import McapFile
@@ -25,40 +22,15 @@ pytestmark = pytest.mark.skipif(not zmq.has("curve"), reason="libzmq without CUR
 RECORDING = REPO / "sim_scans" / "table_chairs_lidar.mcap"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-@pytest.fixture
-def keys(tmp_path: Path) -> dict[str, Path]:
-    import zmq.auth
-
-    made = tmp_path / "made"
-    made.mkdir()
-    for name in ("node", "driver", "client"):
-        zmq.auth.create_certificates(made, name)
-    folder = tmp_path / "node"
-    (folder / "subscribers").mkdir(parents=True)
-    shutil.copy(made / "node.key_secret", folder / "server.key_secret")
-    shutil.copy(made / "driver.key", folder / "scan_server.key")
-    shutil.copy(made / "client.key", folder / "subscribers" / "client.key")
-    trusts_node = tmp_path / "trusts_node"
-    trusts_node.mkdir()
-    shutil.copy(made / "node.key", trusts_node / "node.key")
-    return {"made": made, "folder": folder, "trusts_node": trusts_node}
-
-
 @contextlib.contextmanager
-def _curve_node(keys, scan_endpoint: str = "tcp://127.0.0.1:9"):
+def _curve_node(node_keys, scan_endpoint: str = "tcp://127.0.0.1:9"):
     p = DetectParams()
     node_p = dataclasses.replace(
         p.node,
         scan_endpoint=scan_endpoint,
-        pub_endpoint=f"tcp://127.0.0.1:{_free_port()}",
+        pub_endpoint=f"tcp://127.0.0.1:{free_port()}",
         curve_enabled=True,
-        curve_keys_dir=str(keys["folder"]),
+        curve_keys_dir=str(node_keys["folder"]),
         diagnostics_period=0.2,
         map_period=0.0,
         detect_process=False,
@@ -74,14 +46,14 @@ def _curve_node(keys, scan_endpoint: str = "tcp://127.0.0.1:9"):
             th.join(10)
 
 
-def _client(keys) -> list[str]:
-    made = keys["made"]
+def _client(node_keys) -> list[str]:
+    made = node_keys["made"]
     return ["--curve-key", str(made / "client.key_secret"), "--curve-server-key", str(made / "node.key")]  # fmt: skip
 
 
 @pytest.mark.parametrize("command", ["echo", "hz"])
-def test_echo_and_hz_without_keys_say_why_they_hear_nothing(keys, capsys, command):
-    with _curve_node(keys) as node:
+def test_echo_and_hz_without_keys_say_why_they_hear_nothing(node_keys, capsys, command):
+    with _curve_node(node_keys) as node:
         limit = ["--timeout", "2"] if command == "echo" else ["--duration", "2"]
         assert main([command, "diagnostics", "--endpoint", node.pub_endpoint, *limit]) == 0
     err = capsys.readouterr().err
@@ -90,25 +62,25 @@ def test_echo_and_hz_without_keys_say_why_they_hear_nothing(keys, capsys, comman
     assert err.count("handshake with") == 1  # once, though it reconnects
 
 
-def test_echo_hz_and_record_with_keys_hear_the_node(keys, capsys, tmp_path):
-    with _curve_node(keys) as node:
+def test_echo_hz_and_record_with_keys_hear_the_node(node_keys, capsys, tmp_path):
+    with _curve_node(node_keys) as node:
         ep = node.pub_endpoint
-        assert main(["echo", "diagnostics", "--endpoint", ep, "--count", "1", "--timeout", "10", *_client(keys)]) == 0  # fmt: skip
+        assert main(["echo", "diagnostics", "--endpoint", ep, "--count", "1", "--timeout", "10", *_client(node_keys)]) == 0  # fmt: skip
         out = capsys.readouterr().out
         assert "type: Diagnostics" in out
-        assert main(["hz", "diagnostics", "--endpoint", ep, "--duration", "1.5", *_client(keys)]) == 0  # fmt: skip
+        assert main(["hz", "diagnostics", "--endpoint", ep, "--duration", "1.5", *_client(node_keys)]) == 0  # fmt: skip
         assert "rate " in capsys.readouterr().out
         rec = tmp_path / "d.mcap"
-        assert main(["record", "diagnostics", "-o", str(rec), "--endpoint", ep, "--duration", "1.5", "--quiet", *_client(keys)]) == 0  # fmt: skip
+        assert main(["record", "diagnostics", "-o", str(rec), "--endpoint", ep, "--duration", "1.5", "--quiet", *_client(node_keys)]) == 0  # fmt: skip
     with McapFile(rec) as f:
         assert sum(1 for m in f.messages() if m.channel.topic == "diagnostics") >= 2
 
 
-def test_play_feeds_a_curve_node(keys, capsys):
-    endpoint = f"tcp://127.0.0.1:{_free_port()}"
-    made = keys["made"]
-    driver = ["--curve-key", str(made / "driver.key_secret"), "--curve-authorized", str(keys["trusts_node"])]  # fmt: skip
-    with _curve_node(keys, endpoint) as node:
+def test_play_feeds_a_curve_node(node_keys, capsys):
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
+    made = node_keys["made"]
+    driver = ["--curve-key", str(made / "driver.key_secret"), "--curve-authorized", str(node_keys["trusts_node"])]  # fmt: skip
+    with _curve_node(node_keys, endpoint) as node:
         args = ["play", str(RECORDING), "--endpoint", endpoint, "--duration", "2", "--quiet"]
         assert main([*args, *driver]) == 0
         deadline = time.monotonic() + 5

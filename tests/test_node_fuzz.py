@@ -9,7 +9,6 @@ import collections
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -17,33 +16,15 @@ import time
 import numpy as np
 import pytest
 import zmq
-from conftest import REPO
+from conftest import REPO, free_port
 from test_node_hostile import frames, scene
 
-from supportnode.bus import BusError, CurveKeys, Publisher
+from supportnode.bus import CurveKeys, publisher_when_free
 from supportnode.client import Diagnostics, Subscriber, SupportSurfaces
 from supportnode.msgs import Limits
 from supportnode.msgs.hostile import flipped, rejects
 
 MAX_POINTS, MAX_BYTES = 20_000, 1_000_000
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _bind(endpoint: str, curve: CurveKeys | None = None) -> Publisher:
-    """A driver's publisher; retries while libzmq frees the port of the previous one."""
-    deadline = time.monotonic() + 3.0
-    while True:
-        try:
-            return Publisher(endpoint, curve=curve, hwm=1000)
-        except BusError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
 
 
 class Results:
@@ -75,8 +56,8 @@ class Results:
 def test_fuzz_the_node_subprocess(tmp_path):
     import zmq.auth
 
-    scan_ep = f"tcp://127.0.0.1:{_free_port()}"
-    pub_ep = f"tcp://127.0.0.1:{_free_port()}"
+    scan_ep = f"tcp://127.0.0.1:{free_port()}"
+    pub_ep = f"tcp://127.0.0.1:{free_port()}"
     cmd = [
         sys.executable, "-m", "supportnode", "run",
         "--set", f"node.scan_endpoint={scan_ep}", "--set", f"node.pub_endpoint={pub_ep}",
@@ -89,7 +70,7 @@ def test_fuzz_the_node_subprocess(tmp_path):
     pts = scene()
     limits = Limits(max_points=MAX_POINTS, max_message_bytes=MAX_BYTES)
     sent: collections.Counter[str] = collections.Counter()
-    pub = _bind(scan_ep)
+    pub = publisher_when_free(scan_ep, hwm=1000)
     sub = Subscriber(["surfaces", "diagnostics"], pub_ep, keep_newest=200)
     try:
         res = Results(sub)
@@ -126,12 +107,12 @@ def test_fuzz_the_node_subprocess(tmp_path):
         pub.close()
         zmq.auth.create_certificates(tmp_path, "driver")
         curve = CurveKeys(tmp_path / "driver.key_secret", authorized_dir=tmp_path)
-        with _bind(scan_ep, curve) as wrong:
+        with publisher_when_free(scan_ep, curve=curve, hwm=1000) as wrong:
             deadline = time.monotonic() + 15
             while "handshake_failures_scans_mechanism" not in res.fresh().counters:
                 assert time.monotonic() < deadline, "the node never met the wrong driver"
                 wrong.send(frames(pts, stamp + 0.05))
-        pub = _bind(scan_ep)
+        pub = publisher_when_free(scan_ep, hwm=1000)
         deadline = time.monotonic() + 20
         while not res.pump(lambda: stamp in res.stamps, 0.3):
             assert time.monotonic() < deadline, "the real driver was not heard again"

@@ -10,17 +10,15 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
-import shutil
-import socket
 import threading
 import time
-from pathlib import Path
 
 import pytest
 import zmq
+from conftest import free_port
 from test_node_hostile import frames, scene
 
-from supportnode.bus import BusError, CurveKeys, Publisher, Subscriber
+from supportnode.bus import CurveKeys, Publisher, Subscriber, publisher_when_free
 from supportnode.msgs import SupportSurfaces, decode_any
 from supportnode.node.node import Node
 from supportnode.params import DetectParams
@@ -28,60 +26,21 @@ from supportnode.params import DetectParams
 pytestmark = pytest.mark.skipif(not zmq.has("curve"), reason="libzmq without CURVE")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-@pytest.fixture
-def keys(tmp_path: Path) -> dict[str, Path]:
-    """Key pairs (node, driver, client, stranger) and the node's folder in its layout."""
-    import zmq.auth
-
-    made = tmp_path / "made"
-    made.mkdir()
-    for name in ("node", "driver", "client", "stranger"):
-        zmq.auth.create_certificates(made, name)
-    folder = tmp_path / "node"
-    for sub in ("subscribers", "drivers"):
-        (folder / sub).mkdir(parents=True)
-    shutil.copy(made / "node.key_secret", folder / "server.key_secret")
-    shutil.copy(made / "driver.key", folder / "scan_server.key")
-    shutil.copy(made / "client.key", folder / "subscribers" / "client.key")
-    shutil.copy(made / "driver.key", folder / "drivers" / "driver.key")
-    trusts_node = tmp_path / "driver_allows"  # a binding driver's authorised clients
-    trusts_node.mkdir()
-    shutil.copy(made / "node.key", trusts_node / "node.key")
-    return {"made": made, "folder": folder, "trusts_node": trusts_node}
-
-
-def _driver(keys, endpoint: str, node_binds: bool, curve: bool, pair: str = "driver"):
+def _driver(node_keys, endpoint: str, node_binds: bool, curve: bool, pair: str = "driver"):
     """A scan publisher: binds when the node connects, connects when it binds."""
-    made = keys["made"]
+    made = node_keys["made"]
     ck = None
     if curve and node_binds:
         ck = CurveKeys(made / f"{pair}.key_secret", server_key=made / "node.key")
     elif curve:
-        ck = CurveKeys(made / f"{pair}.key_secret", authorized_dir=keys["trusts_node"])
-    return _publisher(endpoint, bind=not node_binds, curve=ck)
-
-
-def _publisher(endpoint: str, bind: bool = True, curve: CurveKeys | None = None) -> Publisher:
-    """A Publisher; binding retries for 2 s: libzmq frees the port of the previous driver,
-    just closed, asynchronously."""
-    deadline = time.monotonic() + 2.0
-    while True:
-        try:
-            return Publisher(endpoint, bind=bind, curve=curve, hwm=1000)
-        except BusError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.05)
+        ck = CurveKeys(made / f"{pair}.key_secret", authorized_dir=node_keys["trusts_node"])
+    if node_binds:
+        return Publisher(endpoint, bind=False, curve=ck, hwm=1000)
+    return publisher_when_free(endpoint, curve=ck, hwm=1000)
 
 
 @contextlib.contextmanager
-def _node(keys, endpoint: str, node_binds: bool, curve: bool):
+def _node(node_keys, endpoint: str, node_binds: bool, curve: bool):
     p = DetectParams()
     node_p = dataclasses.replace(
         p.node,
@@ -89,14 +48,14 @@ def _node(keys, endpoint: str, node_binds: bool, curve: bool):
         scan_bind=node_binds,
         pub_endpoint="tcp://127.0.0.1:*",
         curve_enabled=curve,
-        curve_keys_dir=str(keys["folder"]) if curve else "",
+        curve_keys_dir=str(node_keys["folder"]) if curve else "",
         map_period=0.0,
         diagnostics_period=0.2,
         detect_process=False,
     )
     with Node(dataclasses.replace(p, node=node_p)) as node:
         node.open()
-        made = keys["made"]
+        made = node_keys["made"]
         ck = CurveKeys(made / "client.key_secret", server_key=made / "node.key") if curve else None
         sub = Subscriber(node.pub_endpoint, ["surfaces", "diagnostics"], keep_newest=50, curve=ck)
         th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
@@ -136,14 +95,16 @@ def _counter(sub: Subscriber, name: str, want: int, seconds: float = 5.0) -> int
 
 @pytest.mark.parametrize("node_binds", [False, True], ids=["node_connects", "node_binds"])
 @pytest.mark.parametrize("node_curve", [True, False], ids=["curve_node", "plain_node"])
-def test_wrong_mechanism_peer_then_the_right_driver_is_heard(keys, caplog, node_binds, node_curve):
-    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+def test_wrong_mechanism_peer_then_the_right_driver_is_heard(
+    node_keys, caplog, node_binds, node_curve
+):
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
     with caplog.at_level(logging.WARNING, logger="supportnode.node"):
-        with _node(keys, endpoint, node_binds, node_curve) as sub:
-            with _driver(keys, endpoint, node_binds, curve=not node_curve) as wrong:
+        with _node(node_keys, endpoint, node_binds, node_curve) as sub:
+            with _driver(node_keys, endpoint, node_binds, curve=not node_curve) as wrong:
                 assert not _heard(wrong, sub, 1.0)
                 failures = _counter(sub, "handshake_failures_scans_mechanism", 1)
-            with _driver(keys, endpoint, node_binds, curve=node_curve) as right:
+            with _driver(node_keys, endpoint, node_binds, curve=node_curve) as right:
                 assert _heard(right, sub, 10.0), "the legitimate driver is not heard"
     assert failures >= 1
     lines = [r.getMessage() for r in caplog.records if "handshake with" in r.getMessage()]
@@ -154,32 +115,32 @@ def test_wrong_mechanism_peer_then_the_right_driver_is_heard(keys, caplog, node_
     assert "127.0.0.1:" in lines[0] or "address gone" in lines[0]
 
 
-def test_driver_with_a_key_not_authorised_is_refused_by_zap(keys, caplog):
+def test_driver_with_a_key_not_authorised_is_refused_by_zap(node_keys, caplog):
     """The node binds for scans: a driver whose key is not in drivers/ is refused (ZAP),
     logged with its address and counted; the authorised driver is heard."""
-    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
     with caplog.at_level(logging.WARNING, logger="supportnode.node"):
-        with _node(keys, endpoint, True, True) as sub:
-            with _driver(keys, endpoint, True, True, pair="stranger") as stranger:
+        with _node(node_keys, endpoint, True, True) as sub:
+            with _driver(node_keys, endpoint, True, True, pair="stranger") as stranger:
                 assert not _heard(stranger, sub, 1.0)
                 assert _counter(sub, "handshake_failures_scans_auth", 1) >= 1
-            with _driver(keys, endpoint, True, True) as right:
+            with _driver(node_keys, endpoint, True, True) as right:
                 assert _heard(right, sub, 10.0)
     lines = [r.getMessage() for r in caplog.records if "its key was refused" in r.getMessage()]
     assert len(lines) == 1 and "127.0.0.1:" in lines[0], lines
 
 
-def test_node_refused_by_its_driver_reconnects_once_the_driver_accepts_it(keys, tmp_path):
+def test_node_refused_by_its_driver_reconnects_once_the_driver_accepts_it(node_keys, tmp_path):
     """The node connects to a driver whose ZAP refuses the node's key (libzmq then ends the
     session for good); the driver restarts authorising it, and the node is heard again."""
-    endpoint = f"tcp://127.0.0.1:{_free_port()}"
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
     nobody = tmp_path / "nobody"
     nobody.mkdir()
-    made = keys["made"]
-    with _node(keys, endpoint, False, True) as sub:
+    made = node_keys["made"]
+    with _node(node_keys, endpoint, False, True) as sub:
         refusing = CurveKeys(made / "driver.key_secret", authorized_dir=nobody)
-        with _publisher(endpoint, curve=refusing) as driver:
+        with publisher_when_free(endpoint, curve=refusing, hwm=1000) as driver:
             assert not _heard(driver, sub, 1.0)
             assert _counter(sub, "handshake_failures_scans_auth", 1) >= 1
-        with _driver(keys, endpoint, False, True) as driver:
+        with _driver(node_keys, endpoint, False, True) as driver:
             assert _heard(driver, sub, 10.0)
