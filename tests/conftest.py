@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import shutil
 import socket
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -91,3 +94,24 @@ def node_keys(tmp_path: Path) -> dict[str, Path]:
     trusts_node.mkdir()
     shutil.copy(made / "node.key", trusts_node / "node.key")
     return {"made": made, "folder": folder, "trusts_node": trusts_node}
+
+
+@contextlib.contextmanager
+def spinning_node(**node_keys):
+    """A `Node` spinning in a thread over real sockets (``node.*`` keys overridden; by default
+    no map messages, diagnostics every 0.2 s, detection in the node's thread): yields (node,
+    its thread); stops it on exit."""
+    from supportnode.node.node import Node
+    from supportnode.params import DetectParams
+
+    keys = {"map_period": 0.0, "diagnostics_period": 0.2, "detect_process": False, **node_keys}
+    p = DetectParams()
+    with Node(dataclasses.replace(p, node=dataclasses.replace(p.node, **keys))) as node:
+        node.open()
+        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
+        th.start()
+        try:
+            yield node, th
+        finally:
+            node.stop()
+            th.join(10)

@@ -5,18 +5,14 @@ play feeds a CURVE node; options that do not fit together are one-line errors.""
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import threading
 import time
 
 import pytest
 import zmq
-from conftest import REPO, free_port
+from conftest import REPO, free_port, spinning_node
 
 from supportnode.cli import main
 from supportnode.io.recording import McapFile
-from supportnode.node.node import Node
-from supportnode.params import DetectParams
 
 pytestmark = pytest.mark.skipif(not zmq.has("curve"), reason="libzmq without CURVE")
 RECORDING = REPO / "sim_scans" / "table_chairs_lidar.mcap"
@@ -24,26 +20,13 @@ RECORDING = REPO / "sim_scans" / "table_chairs_lidar.mcap"
 
 @contextlib.contextmanager
 def _curve_node(node_keys, scan_endpoint: str = "tcp://127.0.0.1:9"):
-    p = DetectParams()
-    node_p = dataclasses.replace(
-        p.node,
+    with spinning_node(
         scan_endpoint=scan_endpoint,
         pub_endpoint=f"tcp://127.0.0.1:{free_port()}",
         curve_enabled=True,
         curve_keys_dir=str(node_keys["folder"]),
-        diagnostics_period=0.2,
-        map_period=0.0,
-        detect_process=False,
-    )
-    with Node(dataclasses.replace(p, node=node_p)) as node:
-        node.open()
-        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
-        th.start()
-        try:
-            yield node
-        finally:
-            node.stop()
-            th.join(10)
+    ) as (node, _):
+        yield node
 
 
 def _client(node_keys) -> list[str]:

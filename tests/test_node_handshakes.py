@@ -8,20 +8,16 @@ by ZAP."""
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import logging
-import threading
 import time
 
 import pytest
 import zmq
-from conftest import free_port
+from conftest import free_port, spinning_node
 from test_node_hostile import frames, scene
 
 from supportnode.bus import CurveKeys, Publisher, Subscriber, publisher_when_free
 from supportnode.msgs import SupportSurfaces, decode_any
-from supportnode.node.node import Node
-from supportnode.params import DetectParams
 
 pytestmark = pytest.mark.skipif(not zmq.has("curve"), reason="libzmq without CURVE")
 
@@ -41,31 +37,18 @@ def _driver(node_keys, endpoint: str, node_binds: bool, curve: bool, pair: str =
 
 @contextlib.contextmanager
 def _node(node_keys, endpoint: str, node_binds: bool, curve: bool):
-    p = DetectParams()
-    node_p = dataclasses.replace(
-        p.node,
-        scan_endpoint=endpoint,
-        scan_bind=node_binds,
-        pub_endpoint="tcp://127.0.0.1:*",
-        curve_enabled=curve,
-        curve_keys_dir=str(node_keys["folder"]) if curve else "",
-        map_period=0.0,
-        diagnostics_period=0.2,
-        detect_process=False,
-    )
-    with Node(dataclasses.replace(p, node=node_p)) as node:
-        node.open()
-        made = node_keys["made"]
-        ck = CurveKeys(made / "client.key_secret", server_key=made / "node.key") if curve else None
-        sub = Subscriber(node.pub_endpoint, ["surfaces", "diagnostics"], keep_newest=50, curve=ck)
-        th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
-        th.start()
-        try:
+    """A node (CURVE or plain) getting scans at ``endpoint``; yields a subscriber of its
+    surfaces and diagnostics."""
+    keys = {"curve_enabled": curve, "curve_keys_dir": str(node_keys["folder"]) if curve else ""}
+    made = node_keys["made"]
+    ck = CurveKeys(made / "client.key_secret", server_key=made / "node.key") if curve else None
+    with spinning_node(
+        scan_endpoint=endpoint, scan_bind=node_binds, pub_endpoint="tcp://127.0.0.1:*", **keys
+    ) as (node, _):
+        with Subscriber(
+            node.pub_endpoint, ["surfaces", "diagnostics"], keep_newest=50, curve=ck
+        ) as sub:
             yield sub
-        finally:
-            node.stop()
-            th.join(10)
-            sub.close()
 
 
 def _heard(pub: Publisher, sub: Subscriber, seconds: float) -> bool:

@@ -7,18 +7,16 @@ not its internals, so that it holds through a rewrite of `supportnode.node`."""
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import threading
 import time
 
 import numpy as np
 import pytest
-from conftest import box_points, plane_points
+from conftest import box_points, plane_points, spinning_node
 
 from supportnode.bus import Publisher
 from supportnode.client import Diagnostics, PointCloud, Subscriber, SupportSurfaces
 from supportnode.node.node import Node
-from supportnode.params import DetectParams
 
 SENSOR = np.array([0.0, 0.0, 1.5])
 POSE = (SENSOR, np.array([0.0, 0.0, 0.0, 1.0]))
@@ -89,32 +87,13 @@ class Driver:
 @contextlib.contextmanager
 def hostile(**node_keys):
     """A node spinning in a thread on 127.0.0.1 (``node.*`` keys overridden) and its Driver."""
-    pub = Publisher("tcp://127.0.0.1:*", hwm=1000)
-    p = DetectParams()
-    keys = {
-        "scan_endpoint": pub.endpoint,
-        "pub_endpoint": "tcp://127.0.0.1:*",
-        "map_period": 0.0,
-        "diagnostics_period": 0.2,
-        "detect_process": False,
-        **node_keys,
-    }
-    try:
-        with Node(dataclasses.replace(p, node=dataclasses.replace(p.node, **keys))) as node:
-            node.open()
-            sub = Subscriber(["surfaces", "diagnostics"], node.pub_endpoint, keep_newest=100)
-            th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
-            th.start()
-            d = Driver(node, pub, sub, th)
-            assert d.fresh_diagnostics(10) is not None  # subscribed: no slow joiner
-            try:
+    with Publisher("tcp://127.0.0.1:*", hwm=1000) as pub:
+        keys = {"scan_endpoint": pub.endpoint, "pub_endpoint": "tcp://127.0.0.1:*", **node_keys}
+        with spinning_node(**keys) as (node, th):
+            with Subscriber(["surfaces", "diagnostics"], node.pub_endpoint, keep_newest=100) as sub:
+                d = Driver(node, pub, sub, th)
+                assert d.fresh_diagnostics(10) is not None  # subscribed: no slow joiner
                 yield d
-            finally:
-                node.stop()
-                th.join(10)
-                sub.close()
-    finally:
-        pub.close()
 
 
 def heights(msg: SupportSurfaces) -> list[float]:
@@ -156,7 +135,8 @@ def test_one_sideways_gravity_is_an_outlier_not_the_map_up():
     disagrees is counted, not adopted; an up that agreeing scans set is not moved by it."""
     with hostile() as d:
         assert heights(d.good_result(1.0)) == [0.0, 0.7]
-        d.good(1.1, gravity=[9.8, 0.0, 0.0])
+        # processed (awaited: a scan sent right behind it could take its place in the queue)
+        assert heights(d.good_result(1.1, gravity=[9.8, 0.0, 0.0])) == [0.0, 0.7]
         assert heights(d.good_result(1.2)) == [0.0, 0.7]
         diag = d.fresh_diagnostics()
         assert diag.counters["gravity_outliers"] == 1
@@ -165,7 +145,7 @@ def test_one_sideways_gravity_is_an_outlier_not_the_map_up():
         level = [0.0, 0.05, -9.8]  # 0.3 deg off +z
         for i in range(3):
             d.good_result(2.0 + 0.1 * i, gravity=level)
-        d.good(2.5, gravity=[0.0, -9.8, 0.0])
+        assert d.good_result(2.5, gravity=[0.0, -9.8, 0.0]) is not None
         got = d.good_result(2.6, gravity=level)
         assert got is not None and heights(got) == [0.0, 0.7]
         diag = d.fresh_diagnostics()
