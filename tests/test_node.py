@@ -261,6 +261,28 @@ def test_gravity_given_rotates_results(rng):
     assert d.counters["gravity_outliers"] == 2  # the two that came before agreement
 
 
+def test_reset_keeps_the_map_frames_up_and_forgets_the_map(rng):
+    """The up set by agreeing scans' gravity belongs to the map frame: a reset (a source that
+    restarted) forgets the map and ids, not the up."""
+    g = [0.0, 0.2, -9.8]  # 1.2 deg off -z
+    with Node() as node:
+        for i in range(3):
+            node.process(
+                _cloud(
+                    _platform(rng, 0, 0) - [0, 0, 1.5],
+                    1.0 + 0.1 * i,
+                    gravity=g,
+                    pose=_sensor_pose(0, 0, 1.5),
+                )
+            )
+        up = node.diagnostics().gauges["gravity_tilt_deg"]
+        node.reset()
+        d = node.diagnostics()
+    assert up == pytest.approx(1.17, abs=0.01)
+    assert d.gauges["gravity_source"] == 1.0 and d.gauges["gravity_tilt_deg"] == up
+    assert d.gauges["map_voxels"] == 0
+
+
 def test_gravity_estimated_without_imu_levels_results(rng):
     """No gravity in the scans, gravity.enabled: the node fits up from the normals of a floor
     and a table seen by a sensor rolled 20 deg and pitched 10 deg, publishes the correction,
