@@ -213,6 +213,7 @@ class Node(Closing):
             "diagnostics_sent": 0,
             "diagnostics_failures": 0,
             "maps_sent": 0,
+            "map_failures": 0,
             "detections_skipped": 0,
             "worker_detections": 0,
             "worker_failures": 0,
@@ -709,20 +710,20 @@ class Node(Closing):
             return None
         return got
 
-    def _reject(self, reason: str, text: str) -> None:
+    def _reject(self, reason: str, text: str, log: RateLimitedLog | None = None) -> None:
+        """Count a scan not used under ``reason``; log it (rate-limited)."""
         self.counters["scans_rejected"] += 1
         self.rejects[reason] = self.rejects.get(reason, 0) + 1
         self.last_reject = text
-        self._reject_log.warning(f"{self.cfg.name}: rejected a scan ({reason}): {text}")
+        if log is None:
+            self._reject_log.warning(f"{self.cfg.name}: rejected a scan ({reason}): {text}")
+        else:
+            log.warning(f"{self.cfg.name}: internal error, {text}", exc_info=True)
 
     def _internal_error(self, where: str, err: Exception) -> None:
         """A bug met while handling a scan: counted as an internal_error reject, logged with
         its traceback at most once per ``node.reject_log_period``. Call from an except block."""
-        text = f"{where}: {type(err).__name__}: {err}"
-        self.counters["scans_rejected"] += 1
-        self.rejects["internal_error"] = self.rejects.get("internal_error", 0) + 1
-        self.last_reject = text
-        self._error_log.warning(f"{self.cfg.name}: internal error, {text}", exc_info=True)
+        self._reject("internal_error", f"{where}: {type(err).__name__}: {err}", self._error_log)
 
     def open(self) -> None:
         """Create the sockets (done by `spin`; in-process use needs none)."""
@@ -849,10 +850,10 @@ class Node(Closing):
                         if out is not None and out.surfaces is not None:
                             self._publish(out, t_recv)
                 if time.monotonic() >= next_diag:
-                    self._publish_diagnostics_safely()
+                    self._publish_safely("diagnostics", self.publish_diagnostics)
                     next_diag = time.monotonic() + period
                 if self.cfg.map_period > 0 and time.monotonic() >= next_map:
-                    self.publish_map()
+                    self._publish_safely("map", self.publish_map)
                     next_map = time.monotonic() + self.cfg.map_period
         finally:
             self._stop.set()
@@ -1061,15 +1062,15 @@ class Node(Closing):
             seq=self._diag_seq,
         )
 
-    def _publish_diagnostics_safely(self) -> None:
-        """`publish_diagnostics` from spin: an error is counted and logged (rate-limited),
-        never the end of the node."""
+    def _publish_safely(self, what: str, publish: Callable[[], object]) -> None:
+        """`publish_diagnostics` or `publish_map` from spin: an error is counted
+        (``<what>_failures``) and logged (rate-limited), never the end of the node."""
         try:
-            self.publish_diagnostics()
+            publish()
         except Exception as err:
-            self.counters["diagnostics_failures"] += 1
+            self.counters[f"{what}_failures"] += 1
             self._error_log.warning(
-                f"{self.cfg.name}: diagnostics not sent: {type(err).__name__}: {err}",
+                f"{self.cfg.name}: {what} not sent: {type(err).__name__}: {err}",
                 exc_info=not isinstance(err, SupportNodeError),
             )
 
