@@ -7,13 +7,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 # Point roles. A `surface` primitive's top face is ROLE_SURFACE; its other faces are STRUCTURE.
-ROLE_SURFACE, ROLE_STRUCTURE, ROLE_OBJECT, ROLE_OUTLIER = 0, 1, 2, 3
+# ROLE_NONE marks the NaN rows of an organised cloud (a pixel with no return).
+ROLE_NONE, ROLE_SURFACE, ROLE_STRUCTURE, ROLE_OBJECT, ROLE_OUTLIER = -1, 0, 1, 2, 3
 ROLE_NAMES: dict[int, str] = {
+    ROLE_NONE: "none",
     ROLE_SURFACE: "surface",
     ROLE_STRUCTURE: "structure",
     ROLE_OBJECT: "object",
     ROLE_OUTLIER: "outlier",
 }
+FRAMES = ("world", "sensor", "optical")
+# Rotation taking body (x fwd, y left, z up) vectors to optical (z fwd, x right, y down) ones.
+OPTICAL_FROM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 
 
 def rotate(points: np.ndarray, rot: np.ndarray) -> np.ndarray:
@@ -35,7 +40,8 @@ def _identity3() -> np.ndarray:
 class SimCloud:
     """A labelled cloud.
 
-    points: (N, 3) float32, metres, in world (z up) or in the sensor frame (see `frame`).
+    points: (N, 3) float32, metres, in world (z up) or in the sensor frame (see `frame`); NaN
+        rows in an organised cloud where a pixel has no return.
     role: (N,) int8, one of ROLE_*.
     primitive: (N,) int32, index into `Scene.primitives` of the primitive hit (-1 for outliers).
     object: (N,) int32, object id (-1 if none); parts of one object share it.
@@ -44,8 +50,11 @@ class SimCloud:
     stamp: seconds.
     tilt_rotation: (3, 3) float64 rotation applied by the `tilt` noise: points = R @ untilted
         (identity when no tilt). Undo with R.T.
-    frame: "world" or "sensor" (the frame of `points`). `sensor_pose` is always the true pose;
-        with a tilt, the untilted points are tilt_rotation.T @ p, in the same frame.
+    frame: "world", "sensor" (the sensor's body: x forward, z up) or "optical" (a camera's:
+        z forward, x right, y down), the frame of `points`. `sensor_pose` is always the true
+        pose; with a tilt, the untilted points are tilt_rotation.T @ p, in the same frame.
+    image_shape: (rows, columns) of an organised cloud (a depth image: N = rows * columns,
+        row-major from the top-left pixel), None for an unorganised one.
     """
 
     points: np.ndarray
@@ -57,14 +66,17 @@ class SimCloud:
     stamp: float = 0.0
     tilt_rotation: np.ndarray = field(default_factory=_identity3)
     frame: str = "world"
+    image_shape: tuple[int, int] | None = None
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
 
     def select(self, mask: np.ndarray) -> SimCloud:
-        """The points where `mask` ((N,) bool or index array) holds, same pose and stamp."""
+        """The points where `mask` ((N,) bool or index array) holds, same pose and stamp;
+        no longer organised."""
         return replace(
             self,
+            image_shape=None,
             points=self.points[mask],
             role=self.role[mask],
             primitive=self.primitive[mask],
@@ -73,24 +85,30 @@ class SimCloud:
         )
 
     def to_frame(self, frame: str) -> SimCloud:
-        """The same cloud expressed in `frame` ("world" or "sensor")."""
-        if frame not in ("world", "sensor"):
-            raise ValueError(f"frame must be 'world' or 'sensor', not {frame!r}")
+        """The same cloud expressed in `frame` (one of FRAMES)."""
+        if frame not in FRAMES:
+            raise ValueError(f"frame must be one of {', '.join(FRAMES)}, not {frame!r}")
         if frame == self.frame:
             return self
         pose, tilt = self.sensor_pose, self.tilt_rotation
         pts = rotate(self.points.astype(np.float64), tilt.T)  # undo the tilt
-        if frame == "sensor":  # p_s = R^T (p_w - t)
-            pts = rotate(pts - pose[:3, 3], pose[:3, :3].T)
-        else:
+        if self.frame == "optical":
+            pts = rotate(pts, OPTICAL_FROM_BODY.T)
+        if self.frame != "world":
             pts = rotate(pts, pose[:3, :3]) + pose[:3, 3]
+        if frame != "world":  # p_s = R^T (p_w - t)
+            pts = rotate(pts - pose[:3, 3], pose[:3, :3].T)
+        if frame == "optical":
+            pts = rotate(pts, OPTICAL_FROM_BODY)
         pts = rotate(pts, tilt)  # the tilt is about the origin of whichever frame the points are in
         return replace(self, points=pts.astype(np.float32), frame=frame)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """NPZ-ready arrays: points, role, primitive, object, surface, sensor_pose, stamp,
-        tilt_rotation, frame."""
+        tilt_rotation, frame, and image_shape (2,) for an organised cloud."""
+        shape = {} if self.image_shape is None else {"image_shape": np.array(self.image_shape)}
         return {
+            **shape,
             "points": self.points,
             "role": self.role,
             "primitive": self.primitive,
@@ -115,10 +133,12 @@ def empty_cloud(n: int = 0) -> SimCloud:
 
 
 def concatenate(clouds: list[SimCloud]) -> SimCloud:
-    """Points of all `clouds` in order; pose, stamp, tilt and frame from the first one."""
+    """Points of all `clouds` in order; pose, stamp, tilt and frame from the first one; not
+    organised."""
     first = clouds[0]
     return replace(
         first,
+        image_shape=None,
         points=np.concatenate([c.points for c in clouds]),
         role=np.concatenate([c.role for c in clouds]),
         primitive=np.concatenate([c.primitive for c in clouds]),

@@ -1,7 +1,8 @@
 """Simulated clouds on disk: PLY (x y z + role primitive object surface) and NPZ (everything).
 
 NPZ keys: points (N, 3) float32, role (N,) int8, primitive / object / surface (N,) int32,
-sensor_pose (4, 4) float64, stamp () float64, tilt_rotation (3, 3) float64, frame () str.
+sensor_pose (4, 4) float64, stamp () float64, tilt_rotation (3, 3) float64, frame () str, and
+image_shape (2,) (rows, columns) for an organised cloud (NaN rows where a pixel saw nothing).
 Several frames go to ``name_000.ext``, ``name_001.ext``... (a file path) or ``frame_000.npz``...
 (a directory), with a JSON of poses and stamps next to them.
 """
@@ -69,6 +70,7 @@ def read_sim_npz(path: str | Path) -> SimCloud:
                 stamp=float(z["stamp"]),
                 tilt_rotation=z["tilt_rotation"] if "tilt_rotation" in z else np.eye(3),
                 frame=str(z["frame"]) if "frame" in z else "world",
+                image_shape=tuple(int(v) for v in z["image_shape"]) if "image_shape" in z else None,
             )
     except (OSError, KeyError, ValueError) as err:
         raise CloudFormatError(f"{path}: not a simulator NPZ ({err})") from err
