@@ -33,9 +33,40 @@ def _load_labels(result_dir: Path) -> dict[str, Any]:
             missing = [k for k in ("surface", "object") if k not in z.files]
             if missing:
                 raise SupportNodeError(f"{path}: missing arrays {', '.join(missing)}")
-            return {"surface": z["surface"], "object": z["object"], "path": path}
+            labels = {"surface": z["surface"], "object": z["object"], "path": path}
     except (OSError, ValueError) as err:
         raise SupportNodeError(f"{path}: cannot read: {err}") from err
+    labels["supported_by"] = _load_supported_by(result_dir / "result.json")
+    return labels
+
+
+def _load_supported_by(path: Path) -> Any:
+    """(C,) int64 supported_by of each object (cluster id order) from result.json, or None
+    when the file or the field is absent (results from before the field)."""
+    import json
+
+    import numpy as np
+
+    from supportnode.errors import SupportNodeError
+
+    if not path.is_file():
+        return None
+    try:
+        objects = json.loads(path.read_text()).get("objects", [])
+    except (OSError, ValueError, AttributeError) as err:
+        raise SupportNodeError(f"{path}: cannot read: {err}") from err
+    if not objects or any("supported_by" not in o for o in objects):
+        return None
+    by = np.full(len(objects), -1, np.int64)
+    for i, o in enumerate(objects):
+        ok = isinstance(o.get("id"), int) and 0 <= o["id"] < len(objects)
+        ok = ok and isinstance(o["supported_by"], int) and not isinstance(o["supported_by"], bool)
+        if not ok:
+            raise SupportNodeError(
+                f"{path}: objects[{i}]: expected an integer id and supported_by (-1: a surface)"
+            )
+        by[o["id"]] = o["supported_by"]
+    return by
 
 
 def _load_truth(path: Path) -> dict[str, Any]:
@@ -63,6 +94,16 @@ def _load_truth(path: Path) -> dict[str, Any]:
     return fields
 
 
+def _support_line(support: dict | None) -> str:
+    """'k of n (stacked k of m)', or '-' when the result or the truth has no supported_by."""
+    if support is None:
+        return "-"
+    return (
+        f"{support['correct']} of {support['total']} "
+        f"(stacked {support['stacked_correct']} of {support['stacked_total']})"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     """Load, score, print a short table, optionally write JSON; 0 on success."""
     import json
@@ -85,6 +126,8 @@ def run(args: argparse.Namespace) -> int:
         labels["object"].astype(np.int64),
         np.asarray(truth["surface"]).astype(np.int64),
         np.asarray(truth["object"]).astype(np.int64),
+        None if "supported_by" not in truth else np.asarray(truth["supported_by"]).astype(np.int64),
+        labels["supported_by"],
     )
     s, o = scores["surfaces"], scores["objects"]
     rows = [
@@ -98,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
         ("objects found", f"{o['found']} of {o['gt_count']}"),
         ("objects merged", f"{o['merged']} {o['merged_groups'] or ''}".rstrip()),
         ("objects split", f"{o['split']}"),
+        ("supported_by right", _support_line(o["support"])),
     ]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:

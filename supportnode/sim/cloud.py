@@ -46,6 +46,10 @@ class SimCloud:
     primitive: (N,) int32, index into `Scene.primitives` of the primitive hit (-1 for outliers).
     object: (N,) int32, object id (-1 if none); parts of one object share it.
     surface: (N,) int32, surface id 0..S-1 per scene (-1 if none).
+    supported_by: (N,) int32, for a point of an object: the object id that object stands on
+        (-1 when it stands on a surface or on nothing, and for points of no object).
+    support_surface: (N,) int32, for a point of an object: the surface under the object or
+        under its stack (-1 when none, and for points of no object).
     sensor_pose: (4, 4) float64 sensor-to-world transform (identity for sampled clouds).
     stamp: seconds.
     tilt_rotation: (3, 3) float64 rotation applied by the `tilt` noise: points = R @ untilted
@@ -62,6 +66,8 @@ class SimCloud:
     primitive: np.ndarray
     object: np.ndarray
     surface: np.ndarray
+    supported_by: np.ndarray
+    support_surface: np.ndarray
     sensor_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
     stamp: float = 0.0
     tilt_rotation: np.ndarray = field(default_factory=_identity3)
@@ -82,6 +88,8 @@ class SimCloud:
             primitive=self.primitive[mask],
             object=self.object[mask],
             surface=self.surface[mask],
+            supported_by=self.supported_by[mask],
+            support_surface=self.support_surface[mask],
         )
 
     def to_frame(self, frame: str) -> SimCloud:
@@ -104,8 +112,9 @@ class SimCloud:
         return replace(self, points=pts.astype(np.float32), frame=frame)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """NPZ-ready arrays: points, role, primitive, object, surface, sensor_pose, stamp,
-        tilt_rotation, frame, and image_shape (2,) for an organised cloud."""
+        """NPZ-ready arrays: points, role, primitive, object, surface, supported_by,
+        support_surface, sensor_pose, stamp, tilt_rotation, frame, and image_shape (2,) for an
+        organised cloud."""
         shape = {} if self.image_shape is None else {"image_shape": np.array(self.image_shape)}
         return {
             **shape,
@@ -114,6 +123,8 @@ class SimCloud:
             "primitive": self.primitive,
             "object": self.object,
             "surface": self.surface,
+            "supported_by": self.supported_by,
+            "support_surface": self.support_surface,
             "sensor_pose": self.sensor_pose,
             "stamp": np.float64(self.stamp),
             "tilt_rotation": self.tilt_rotation,
@@ -129,6 +140,8 @@ def empty_cloud(n: int = 0) -> SimCloud:
         primitive=np.empty(n, np.int32),
         object=np.empty(n, np.int32),
         surface=np.empty(n, np.int32),
+        supported_by=np.empty(n, np.int32),
+        support_surface=np.empty(n, np.int32),
     )
 
 
@@ -144,4 +157,6 @@ def concatenate(clouds: list[SimCloud]) -> SimCloud:
         primitive=np.concatenate([c.primitive for c in clouds]),
         object=np.concatenate([c.object for c in clouds]),
         surface=np.concatenate([c.surface for c in clouds]),
+        supported_by=np.concatenate([c.supported_by for c in clouds]),
+        support_surface=np.concatenate([c.support_surface for c in clouds]),
     )

@@ -128,6 +128,8 @@ def _take(cloud: SimCloud, src: np.ndarray) -> SimCloud:
         primitive=cloud.primitive[src],
         object=cloud.object[src],
         surface=cloud.surface[src],
+        supported_by=cloud.supported_by[src],
+        support_surface=cloud.support_surface[src],
     )
 
 
@@ -138,4 +140,6 @@ def _mark_holes(cloud: SimCloud, hole: np.ndarray) -> SimCloud:
         primitive=np.where(hole, -1, cloud.primitive).astype(np.int32),
         object=np.where(hole, -1, cloud.object).astype(np.int32),
         surface=np.where(hole, -1, cloud.surface).astype(np.int32),
+        supported_by=np.where(hole, -1, cloud.supported_by).astype(np.int32),
+        support_surface=np.where(hole, -1, cloud.support_surface).astype(np.int32),
     )

@@ -106,6 +106,8 @@ def apply_noise(
             primitive=np.full(n_out, -1, np.int32),
             object=np.full(n_out, -1, np.int32),
             surface=np.full(n_out, -1, np.int32),
+            supported_by=np.full(n_out, -1, np.int32),
+            support_surface=np.full(n_out, -1, np.int32),
         )
         out = concatenate([out, noise])
     return out

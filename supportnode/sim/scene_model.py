@@ -3,6 +3,7 @@ from YAML, or in code)."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from supportnode.sim.cloud import ROLE_OBJECT, ROLE_STRUCTURE, ROLE_SURFACE
 from supportnode.sim.primitives import Shape
+from supportnode.sim.support import Support, object_support
 
 # (8, 3) corner signs of a box, in the order Box.local_corners used.
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
@@ -61,17 +63,30 @@ class Scene:
         boxes = np.stack([p.world_aabb() for p in self.primitives])
         return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
 
+    @functools.cached_property
+    def support(self) -> Support:
+        """What holds each object up (see `supportnode.sim.support`), derived once."""
+        return object_support(self)
+
     def label_table(self) -> dict[str, np.ndarray]:
         """Per-primitive lookup arrays, each (P,): role of the top face and of other faces
-        (int8), object id and surface id of the top face (int32)."""
+        (int8), object id and surface id of the top face, and for object parts the object's
+        support: the object it stands on and the surface under it or its stack (int32, -1
+        for none)."""
         code = {"surface": ROLE_SURFACE, "structure": ROLE_STRUCTURE, "object": ROLE_OBJECT}
         is_surf = np.array([p.role == "surface" for p in self.primitives])
         role = np.array([code[p.role] for p in self.primitives], np.int8)
+        obj = np.array([p.object_id for p in self.primitives], np.int32)
+        support = self.support
+        by = np.append(support.supported_by, np.int32(-1))  # index -1: not an object
+        under = np.append(support.surface, np.int32(-1))
         return {
             "role_top": role,
             "role_other": np.where(is_surf, ROLE_STRUCTURE, role).astype(np.int8),
-            "object": np.array([p.object_id for p in self.primitives], np.int32),
+            "object": obj,
             "surface_top": np.array([p.surface_id for p in self.primitives], np.int32),
+            "supported_by": by[obj],
+            "support_surface": under[obj],
         }
 
 

@@ -34,11 +34,18 @@ _CHUNK = 1 << 20  # points generated per face per step when sampling: bounds tem
 
 
 def _labels(scene: Scene, prim: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, ...]:
-    """role (int8), object (int32), surface (int32) for hits on primitives `prim` ((N,) int)."""
+    """role (int8), object, surface, supported_by, support_surface (int32) for hits on
+    primitives `prim` ((N,) int)."""
     table = scene.label_table()
     role = np.where(top, table["role_top"][prim], table["role_other"][prim]).astype(np.int8)
     surface = np.where(role == ROLE_SURFACE, table["surface_top"][prim], -1).astype(np.int32)
-    return role, table["object"][prim], surface
+    return (
+        role,
+        table["object"][prim],
+        surface,
+        table["supported_by"][prim],
+        table["support_surface"][prim],
+    )
 
 
 def sample_scene(
@@ -97,6 +104,8 @@ def sample_scene(
         out.primitive[sl] = i
         out.object[sl] = prim.object_id
         out.surface[sl] = prim.surface_id if is_surface else -1
+        out.supported_by[sl] = table["supported_by"][i]
+        out.support_surface[sl] = table["support_surface"][i]
         filled = 0
         while filled < count:  # draw, drop hidden points, draw again for what is missing
             want = min(_CHUNK, count - filled)
@@ -203,7 +212,7 @@ def _scan(
     if projector is not None:
         ok &= ~_shadowed(scene, pose[:3, :3] @ projector + pose[:3, 3], points, ok)
     keep = np.arange(len(t)) if image_shape is not None else np.flatnonzero(ok)
-    role, obj, surface = _labels(scene, np.where(ok, prim, 0)[keep], top[keep])
+    role, obj, surface, by, under = _labels(scene, np.where(ok, prim, 0)[keep], top[keep])
     miss = ~ok[keep]
     points[~ok] = np.nan
     return SimCloud(
@@ -212,6 +221,8 @@ def _scan(
         primitive=np.where(miss, -1, prim[keep]).astype(np.int32),
         object=np.where(miss, -1, obj).astype(np.int32),
         surface=np.where(miss, -1, surface).astype(np.int32),
+        supported_by=np.where(miss, -1, by).astype(np.int32),
+        support_surface=np.where(miss, -1, under).astype(np.int32),
         sensor_pose=pose.copy(),
         stamp=float(stamp),
         image_shape=image_shape,
