@@ -54,7 +54,7 @@ def kinect_noise(
     origin = cloud.sensor_pose[:3, 3]
     axis = cloud.sensor_pose[:3, 0]  # the optical axis: the body's x
     ray = cloud.points.astype(np.float64) - origin
-    dist = np.linalg.norm(ray, axis=1)
+    dist = np.sqrt(np.einsum("ij,ij->i", ray, ray))
     unit_ray = ray / dist[:, None]
     with np.errstate(invalid="ignore"):
         depth = ray @ axis

@@ -7,6 +7,7 @@ x right, y down) if needed.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -234,7 +235,7 @@ def _shadowed(scene: Scene, source: np.ndarray, points: np.ndarray, ok: np.ndarr
     out = np.zeros(len(points), bool)
     idx = np.flatnonzero(ok)
     ray = points[idx] - source
-    dist = np.linalg.norm(ray, axis=1)
+    dist = np.sqrt(np.einsum("ij,ij->i", ray, ray))
     t, _, _ = raycast(scene, source, ray / dist[:, None], float(dist.max(initial=0.0)))
     out[idx] = t < dist - 1e-3  # 1 mm: the point's own surface is no blocker
     return out
@@ -316,13 +317,9 @@ class DepthCamera:
 
     def directions(self) -> np.ndarray:
         """(height * width, 3) float64 unit rays in the body frame, row-major from the top-left
-        pixel. Max range applies along the ray (not the optical depth)."""
-        f = self.focal_px
-        u = np.arange(self.width) + 0.5 - self.width / 2.0
-        v = np.arange(self.height) + 0.5 - self.height / 2.0
-        vv, uu = np.meshgrid(v, u, indexing="ij")
-        d = np.stack([np.full(uu.shape, f), -uu, -vv], axis=-1).reshape(-1, 3)
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        pixel (read-only: computed once per camera). Max range applies along the ray (not the
+        optical depth)."""
+        return _camera_rays(self)
 
     def scan(
         self, scene: Scene, pose: np.ndarray, stamp: float = 0.0, organized: bool = False
@@ -334,6 +331,18 @@ class DepthCamera:
         return _scan(
             scene, self.directions(), pose, self.min_range, self.max_range, stamp, projector, shape
         )
+
+
+@functools.cache
+def _camera_rays(camera: DepthCamera) -> np.ndarray:
+    f = camera.focal_px
+    u = np.arange(camera.width) + 0.5 - camera.width / 2.0
+    v = np.arange(camera.height) + 0.5 - camera.height / 2.0
+    vv, uu = np.meshgrid(v, u, indexing="ij")
+    d = np.stack([np.full(uu.shape, f), -uu, -vv], axis=-1).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    d.setflags(write=False)
+    return d
 
 
 Sensor = Lidar | DepthCamera
