@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from supportnode.io.clouds import read_cloud
-from supportnode.sim import load_scene, look_at, parse_scene, sample_scene
+from supportnode.sim import bundled_scenes, load_scene, look_at, parse_scene, sample_scene
 from supportnode.sim.files import read_sim_npz, write_sim_cloud
 from supportnode.sim.sensors import DepthCamera
 
@@ -66,8 +66,13 @@ def test_bundled_scenes_support():
         k("fruit_bowl")
     ] * 3
     assert kitchen.support.supported_by[k("bowl")] == k("cutting_board")
+    clutter = load_scene("cluttered_table")
+    c = clutter.object_names.index
+    stacked = {clutter.object_names[o] for o in np.flatnonzero(clutter.support.supported_by >= 0)}
+    assert stacked == {"stack_top", "small_box"}
+    assert clutter.support.supported_by[c("small_box")] == c("book")
     # Every object of every bundled scene stands on something that leads to a surface.
-    for name in ("shelf", "table_chairs", "u_table", "kitchen", "sloped"):
+    for name in bundled_scenes():
         assert (load_scene(name).support.surface >= 0).all(), name
 
 

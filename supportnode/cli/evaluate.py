@@ -41,32 +41,21 @@ def _load_labels(result_dir: Path) -> dict[str, Any]:
 
 
 def _load_supported_by(path: Path) -> Any:
-    """(C,) int64 supported_by of each object (cluster id order) from result.json, or None
-    when the file or the field is absent (results from before the field)."""
+    """(C,) supported_by per object from result.json, or None without the file or the field."""
     import json
 
-    import numpy as np
-
-    from supportnode.errors import SupportNodeError
+    from supportnode.errors import InputError, SupportNodeError
+    from supportnode.sim.evaluate import supported_by_of
 
     if not path.is_file():
         return None
     try:
-        objects = json.loads(path.read_text()).get("objects", [])
-    except (OSError, ValueError, AttributeError) as err:
+        doc = json.loads(path.read_text())
+        return supported_by_of(doc.get("objects", []) if isinstance(doc, dict) else [])
+    except (OSError, ValueError) as err:
         raise SupportNodeError(f"{path}: cannot read: {err}") from err
-    if not objects or any("supported_by" not in o for o in objects):
-        return None
-    by = np.full(len(objects), -1, np.int64)
-    for i, o in enumerate(objects):
-        ok = isinstance(o.get("id"), int) and 0 <= o["id"] < len(objects)
-        ok = ok and isinstance(o["supported_by"], int) and not isinstance(o["supported_by"], bool)
-        if not ok:
-            raise SupportNodeError(
-                f"{path}: objects[{i}]: expected an integer id and supported_by (-1: a surface)"
-            )
-        by[o["id"]] = o["supported_by"]
-    return by
+    except InputError as err:
+        raise SupportNodeError(f"{path}: {err}") from err
 
 
 def _load_truth(path: Path) -> dict[str, Any]:

@@ -9,9 +9,9 @@ angle between the ray and the surface normal):
 
 Depth is quantised as the sensor measures it, in disparity steps of 1/8 pixel: d = f b / z
 rounded to 1/8 px (Khoshelham and Elberink, "Accuracy and Resolution of Kinect Depth Data for
-Indoor Mapping Applications", Sensors 12, 2012: a step of about 2.9 mm at 1 m, 6.5 mm at 1.5 m,
-growing with z^2). Holes (NaN) open where the sensor loses the pattern: at grazing angles, on
-depth edges, and on scattered dark pixels. Lateral noise moves a pixel's measurement to a
+Indoor Mapping Applications", Sensors 12, 2012: with f = 525 px and b = 7.5 cm a step of 3.2 mm
+at 1 m and 7.1 mm at 1.5 m, growing with z^2). Holes (NaN) open where the sensor loses the
+pattern: at grazing angles, on depth edges, and on scattered dark pixels. Lateral noise moves a pixel's measurement to a
 neighbouring pixel's surface point (its depth and its ground truth), which is how edges fray.
 """
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 
-__all__ = ["adjusted_rand_index", "contingency", "evaluate"]
+__all__ = ["adjusted_rand_index", "contingency", "evaluate", "supported_by_of"]
 
 MATCH_IOU = 0.5  # a GT surface is found by a predicted one with at least this IoU
 MAJORITY = 0.5  # object found: majority cluster holds >= this of it and is >= this the object
@@ -57,6 +57,25 @@ def adjusted_rand_index(truth: np.ndarray, pred: np.ndarray) -> float:
     if top == expected:  # both partitions trivial (all one cluster, or all singletons)
         return 1.0
     return float((index - expected) / (top - expected))
+
+
+def supported_by_of(objects: list) -> np.ndarray | None:
+    """(C,) int64 supported_by per cluster id from result.json's ``objects`` (each a dict with
+    an integer ``id`` and ``supported_by``, -1 on a surface); None when any object lacks the
+    field (results from before it). InputError naming the object when one is malformed."""
+    if not objects or any(not isinstance(o, dict) or "supported_by" not in o for o in objects):
+        return None
+    by = np.full(len(objects), -1, np.int64)
+    for i, o in enumerate(objects):
+        ids = (o.get("id"), o["supported_by"])
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in ids) or not (
+            0 <= ids[0] < len(objects)
+        ):
+            raise InputError(
+                f"objects[{i}]: expected an integer id and supported_by (-1: a surface)"
+            )
+        by[ids[0]] = ids[1]
+    return by
 
 
 def _check(name: str, arr: np.ndarray, n: int | None) -> np.ndarray:
