@@ -43,6 +43,7 @@ import yaml
 from supportnode.errors import SceneError
 from supportnode.sim.primitives import KINDS, Bowl, Box, Cone, Cup, Cylinder, Shape, Sphere, Torus
 from supportnode.sim.scene_model import Primitive, Scene, pose_matrix, rpy_matrix
+from supportnode.sim.scene_yaml import LineLoader, LineMap, LineSeq
 
 __all__ = [
     "Primitive",
@@ -86,50 +87,6 @@ _TRAJ_KEYS = {
 }
 
 
-# --- YAML with line numbers -------------------------------------------------------------------
-
-
-class _Map(dict):
-    """A mapping that remembers its own line and each key's line (1-based)."""
-
-    line: int = 0
-    key_lines: dict[Any, int]
-
-
-class _Seq(list):
-    line: int = 0
-    item_lines: list[int]
-
-
-class _Loader(yaml.SafeLoader):
-    pass
-
-
-def _construct_map(loader: _Loader, node: yaml.MappingNode) -> _Map:
-    loader.flatten_mapping(node)
-    m = _Map()
-    m.line = node.start_mark.line + 1
-    m.key_lines = {}
-    for k_node, v_node in node.value:
-        key = loader.construct_object(k_node, deep=True)
-        if key in m:
-            raise SceneError(f"{{file}}:{k_node.start_mark.line + 1}: duplicate key {key!r}")
-        m[key] = loader.construct_object(v_node, deep=True)
-        m.key_lines[key] = k_node.start_mark.line + 1
-    return m
-
-
-def _construct_seq(loader: _Loader, node: yaml.SequenceNode) -> _Seq:
-    s = _Seq(loader.construct_object(n, deep=True) for n in node.value)
-    s.line = node.start_mark.line + 1
-    s.item_lines = [n.start_mark.line + 1 for n in node.value]
-    return s
-
-
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
-
-
 # --- Parsing ----------------------------------------------------------------------------------
 
 
@@ -138,7 +95,7 @@ class _Parser:
 
     def __init__(self, source: str) -> None:
         self.source = source
-        self.defines: _Map = _Map()
+        self.defines: LineMap = LineMap()
         self.prims: list[Primitive] = []
         self.surfaces: dict[str, int] = {}
         self.objects: dict[str, int] = {}
@@ -147,10 +104,12 @@ class _Parser:
     def fail(self, line: int, msg: str) -> SceneError:
         return SceneError(f"{self.source}:{line}: {msg}")
 
-    def line_of(self, m: _Map, key: str) -> int:
-        return m.key_lines.get(key, m.line) if isinstance(m, _Map) else 0
+    def line_of(self, m: LineMap, key: str) -> int:
+        return m.key_lines.get(key, m.line) if isinstance(m, LineMap) else 0
 
-    def numbers(self, m: _Map, key: str, n: int, label: str, positive: bool = False) -> list[float]:
+    def numbers(
+        self, m: LineMap, key: str, n: int, label: str, positive: bool = False
+    ) -> list[float]:
         value = m[key]
         values = value if isinstance(value, list) else [value]
         ok = len(values) == n and all(
@@ -166,14 +125,14 @@ class _Parser:
             )
         return [float(v) for v in values]
 
-    def name_value(self, m: _Map, key: str, label: str) -> str:
+    def name_value(self, m: LineMap, key: str, label: str) -> str:
         value = m[key]
         if isinstance(value, bool) or not isinstance(value, (str, int)):
             raise self.fail(self.line_of(m, key), f"{label}: key {key!r} must be a name or an id")
         return str(value)
 
     def parse(self, doc: Any) -> None:
-        if not isinstance(doc, _Map):
+        if not isinstance(doc, LineMap):
             raise self.fail(getattr(doc, "line", 1), "a scene must be a mapping with 'primitives'")
         for key in doc:
             if key not in _TOP_KEYS:
@@ -182,7 +141,7 @@ class _Parser:
         if "primitives" not in doc:
             raise self.fail(doc.line, "missing key 'primitives'")
         if "define" in doc:
-            if not isinstance(doc["define"], _Map):
+            if not isinstance(doc["define"], LineMap):
                 raise self.fail(doc.key_lines["define"], "'define' must map names to lists")
             self.defines = doc["define"]
         self.children(doc["primitives"], self.line_of(doc, "primitives"), np.eye(4), {}, "", "", [])
@@ -199,17 +158,17 @@ class _Parser:
         path: str,
         stack: list[str],
     ) -> None:
-        if not isinstance(items, _Seq):
+        if not isinstance(items, LineSeq):
             raise self.fail(line, f"{path or 'primitives'}: expected a list of primitives")
         for i, item in enumerate(items):
             label_path = f"{path}.{i}" if path else str(i)
-            if not isinstance(item, _Map):
+            if not isinstance(item, LineMap):
                 raise self.fail(items.item_lines[i], f"primitive {label_path}: expected a mapping")
             self.item(item, parent, inherited, scope, label_path, stack)
 
     def item(
         self,
-        m: _Map,
+        m: LineMap,
         parent: np.ndarray,
         inherited: dict[str, Any],
         scope: str,
@@ -278,7 +237,7 @@ class _Parser:
         self.leaf(m, kind, name, label, pose, labels)
 
     def leaf(
-        self, m: _Map, kind: str, name: str, label: str, pose: np.ndarray, labels: dict[str, Any]
+        self, m: LineMap, kind: str, name: str, label: str, pose: np.ndarray, labels: dict[str, Any]
     ) -> None:
         sizes: dict[str, Any] = {}
         for key in _SHAPE_KEYS[kind] | _OPTIONAL_KEYS.get(kind, set()):
@@ -323,11 +282,11 @@ class _Parser:
 
 
 def _parse_trajectory(p: _Parser, doc: Any) -> dict[str, Any]:
-    if not isinstance(doc, _Map) or "trajectory" not in doc:
+    if not isinstance(doc, LineMap) or "trajectory" not in doc:
         return {}
     t = doc["trajectory"]
     line = doc.key_lines["trajectory"]
-    if not isinstance(t, _Map) or t.get("kind") not in _TRAJ_KEYS:
+    if not isinstance(t, LineMap) or t.get("kind") not in _TRAJ_KEYS:
         raise p.fail(line, "trajectory: expected a mapping with kind circle or line")
     allowed = _TRAJ_KEYS[t["kind"]]
     for key in t:
@@ -356,7 +315,7 @@ def parse_scene(text: str, source: str = "<string>", name: str = "scene") -> Sce
     """A `Scene` from YAML text; `source` names the file in error messages."""
     parser = _Parser(source)
     try:
-        doc = yaml.load(text, Loader=_Loader)  # safe: _Loader derives from SafeLoader
+        doc = yaml.load(text, Loader=LineLoader)  # safe: LineLoader derives from SafeLoader
     except SceneError as err:  # duplicate key raised from inside the loader
         raise SceneError(str(err).replace("{file}", source)) from None
     except yaml.YAMLError as err:
