@@ -183,3 +183,22 @@ def test_cli_eval_reports_supported_by(tmp_path, capsys) -> None:
     assert _main(["eval", str(d), str(gt)]) == 2
     err = capsys.readouterr().err
     assert "result.json: objects[0]" in err and err.count("\n") == 1
+
+
+def test_cli_eval_organised_ply_truth_with_nan_rows(tmp_path, result_dir) -> None:
+    """An organised cloud's NaN pixels are dropped on reading, as detect drops them; the
+    labels (one per file row) still line up with the truth row by row."""
+    clouds = pytest.importorskip("supportnode.io.clouds")
+    points = np.random.default_rng(0).random((14, 3))
+    points[[3, 10]] = np.nan  # two pixels without a return
+    rows = np.delete(np.arange(14), [3, 10])
+    obj, surf = np.full(14, -1, np.int32), np.full(14, -1, np.int32)
+    obj[rows], surf[rows] = GT_OBJECT, GT_SURFACE
+    gt = tmp_path / "organised.ply"
+    clouds.write_ply(gt, points, fields={"object": obj, "surface": surf})
+    np.savez(result_dir / "labels.npz", surface=surf, object=obj)
+    out = tmp_path / "s.json"
+    assert _main(["eval", str(result_dir), str(gt), "--json", str(out)]) == 0
+    scores = json.loads(out.read_text())
+    assert scores["points"] == 14 and scores["objects"]["ari"] == 1.0
+    assert scores["surfaces"]["f1"] == 1.0

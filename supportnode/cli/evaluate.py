@@ -74,7 +74,14 @@ def _load_truth(path: Path) -> dict[str, Any]:
     else:
         from supportnode.io.clouds import read_cloud
 
-        fields = dict(read_cloud(path).fields)
+        cloud = read_cloud(path)
+        # Rows without a finite point (an organised cloud's NaN pixels) are dropped on reading,
+        # as detect drops them; their truth is "none", so the labels line up row by row.
+        fields = {}
+        for key, value in cloud.fields.items():
+            full = np.full((cloud.input_count, *value.shape[1:]), -1, value.dtype)
+            full[cloud.source_index] = value
+            fields[key] = full
     missing = [k for k in ("object", "surface") if k not in fields]
     if missing:
         raise SupportNodeError(
