@@ -22,7 +22,7 @@ from supportnode.errors import AlignmentError
 from supportnode.geometry.gravity import estimate_gravity
 from supportnode.pipeline import detect
 from supportnode.sim import load_scene
-from supportnode.sim.evaluate import evaluate, supported_by_of
+from supportnode.sim.evaluate import evaluate, format_support, supported_by_of
 from supportnode.sim.noise import parse_noise
 from supportnode.sim.sensors import DepthCamera, Lidar
 from supportnode.sim.simulate import sampled, scans
@@ -57,18 +57,8 @@ def row(scene: str, variant: str, ev: dict) -> list:
         f"{o['found']}/{o['gt_count']}",
         o["merged"],
         o["split"],
-        _support(o["support"]),
+        format_support(o["support"]),
     ]
-
-
-def _support(support: dict | None) -> str:
-    """'right/objects (right/stacked)', or '-' when the detection gives no supported_by."""
-    if support is None:
-        return "-"
-    return (
-        f"{support['correct']}/{support['total']} "
-        f"({support['stacked_correct']}/{support['stacked_total']})"
-    )
 
 
 def gravity_errors(scene, n_points: int, tilts: int, seed: int = 0) -> tuple[list[float], int]:

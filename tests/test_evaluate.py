@@ -168,7 +168,7 @@ def test_cli_eval_reports_supported_by(tmp_path, capsys) -> None:
     (d / "result.json").write_text(json.dumps({"objects": objects}))
     out = tmp_path / "s.json"
     assert _main(["eval", str(d), str(gt), "--json", str(out)]) == 0
-    assert "supported_by right  3 of 3 (stacked 1 of 1)" in capsys.readouterr().out
+    assert "supported_by right  3/3 (stacked 1/1)" in capsys.readouterr().out
     assert json.loads(out.read_text())["objects"]["support"]["accuracy"] == 1.0
     # Results from before the field: the line says "-".
     for o in objects:

@@ -90,16 +90,6 @@ def _load_truth(path: Path) -> dict[str, Any]:
     return fields
 
 
-def _support_line(support: dict | None) -> str:
-    """'k of n (stacked k of m)', or '-' when the result or the truth has no supported_by."""
-    if support is None:
-        return "-"
-    return (
-        f"{support['correct']} of {support['total']} "
-        f"(stacked {support['stacked_correct']} of {support['stacked_total']})"
-    )
-
-
 def run(args: argparse.Namespace) -> int:
     """Load, score, print a short table, optionally write JSON; 0 on success."""
     import json
@@ -107,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from supportnode.errors import SupportNodeError
-    from supportnode.sim.evaluate import evaluate
+    from supportnode.sim.evaluate import evaluate, format_support
 
     labels = _load_labels(args.result_dir)
     truth = _load_truth(args.gt_cloud)
@@ -137,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         ("objects found", f"{o['found']} of {o['gt_count']}"),
         ("objects merged", f"{o['merged']} {o['merged_groups'] or ''}".rstrip()),
         ("objects split", f"{o['split']}"),
-        ("supported_by right", _support_line(o["support"])),
+        ("supported_by right", format_support(o["support"])),
     ]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:

@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from supportnode.sim.cloud import ROLE_NONE, SimCloud, rotate
+from supportnode.sim.cloud import SimCloud, rotate
 from supportnode.sim.scene_model import Scene
 from supportnode.sim.sensors import DepthCamera, surface_normals
 
@@ -63,7 +63,7 @@ def kinect_noise(
     theta = np.arccos(np.clip(np.nan_to_num(cos_inc, nan=1.0), np.cos(np.radians(89.0)), 1.0))
     src = _lateral_source(depth, theta, rows, cols, rng, scale)
     depth, theta = depth[src], theta[src]
-    out = _take(cloud, src)
+    out = replace(cloud.select(src), image_shape=cloud.image_shape)  # labels of the source
     sigma = 0.0012 + 0.0019 * (depth - 0.4) ** 2
     sigma = sigma + 0.0001 / np.sqrt(np.maximum(depth, 1e-3)) * (theta / (np.pi / 2 - theta)) ** 2
     noisy = depth + scale * sigma * rng.standard_normal(depth.size)
@@ -75,8 +75,7 @@ def kinect_noise(
     # The measurement lies on this pixel's ray, at the measured optical depth.
     pixel_ray = rotate(camera.directions(), cloud.sensor_pose[:3, :3])
     points = origin + pixel_ray * (measured / (pixel_ray @ axis))[:, None]
-    points[hole] = np.nan
-    return _mark_holes(replace(out, points=points.astype(np.float32)), hole)
+    return replace(out, points=points.astype(np.float32)).without_returns(hole)
 
 
 def _lateral_source(
@@ -118,28 +117,3 @@ def _holes(
     edge = jump.reshape(-1) > EDGE_JUMP
     p_lost = np.maximum(p_lost, np.where(edge, EDGE_LOSS, DARK_LOSS))
     return (rng.random(depth.size) < p_lost) | ~np.isfinite(depth)
-
-
-def _take(cloud: SimCloud, src: np.ndarray) -> SimCloud:
-    """The cloud's labels re-indexed by `src`, organisation kept."""
-    return replace(
-        cloud,
-        role=cloud.role[src],
-        primitive=cloud.primitive[src],
-        object=cloud.object[src],
-        surface=cloud.surface[src],
-        supported_by=cloud.supported_by[src],
-        support_surface=cloud.support_surface[src],
-    )
-
-
-def _mark_holes(cloud: SimCloud, hole: np.ndarray) -> SimCloud:
-    return replace(
-        cloud,
-        role=np.where(hole, ROLE_NONE, cloud.role).astype(np.int8),
-        primitive=np.where(hole, -1, cloud.primitive).astype(np.int32),
-        object=np.where(hole, -1, cloud.object).astype(np.int32),
-        surface=np.where(hole, -1, cloud.surface).astype(np.int32),
-        supported_by=np.where(hole, -1, cloud.supported_by).astype(np.int32),
-        support_surface=np.where(hole, -1, cloud.support_surface).astype(np.int32),
-    )

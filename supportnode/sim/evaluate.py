@@ -15,7 +15,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 
-__all__ = ["adjusted_rand_index", "contingency", "evaluate", "supported_by_of"]
+__all__ = ["adjusted_rand_index", "contingency", "evaluate", "format_support", "supported_by_of"]
 
 MATCH_IOU = 0.5  # a GT surface is found by a predicted one with at least this IoU
 MAJORITY = 0.5  # object found: majority cluster holds >= this of it and is >= this the object
@@ -76,6 +76,17 @@ def supported_by_of(objects: list) -> np.ndarray | None:
             )
         by[ids[0]] = ids[1]
     return by
+
+
+def format_support(support: dict | None) -> str:
+    """'right/objects (stacked right/stacked)' of evaluate()'s objects["support"], or '-'
+    when the detection (or the truth) has no supported_by."""
+    if support is None:
+        return "-"
+    return (
+        f"{support['correct']}/{support['total']} "
+        f"(stacked {support['stacked_correct']}/{support['stacked_total']})"
+    )
 
 
 def _check(name: str, arr: np.ndarray, n: int | None) -> np.ndarray:

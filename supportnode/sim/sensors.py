@@ -14,7 +14,6 @@ import numpy as np
 
 from supportnode.sim.cloud import (
     OPTICAL_FROM_BODY,
-    ROLE_NONE,
     ROLE_SURFACE,
     SimCloud,
     empty_cloud,
@@ -214,20 +213,19 @@ def _scan(
         ok &= ~_shadowed(scene, pose[:3, :3] @ projector + pose[:3, 3], points, ok)
     keep = np.arange(len(t)) if image_shape is not None else np.flatnonzero(ok)
     role, obj, surface, by, under = _labels(scene, np.where(ok, prim, 0)[keep], top[keep])
-    miss = ~ok[keep]
-    points[~ok] = np.nan
-    return SimCloud(
+    cloud = SimCloud(
         points=points[keep].astype(np.float32),
-        role=np.where(miss, ROLE_NONE, role).astype(np.int8),
-        primitive=np.where(miss, -1, prim[keep]).astype(np.int32),
-        object=np.where(miss, -1, obj).astype(np.int32),
-        surface=np.where(miss, -1, surface).astype(np.int32),
-        supported_by=np.where(miss, -1, by).astype(np.int32),
-        support_surface=np.where(miss, -1, under).astype(np.int32),
+        role=role,
+        primitive=prim[keep],
+        object=obj,
+        surface=surface,
+        supported_by=by,
+        support_surface=under,
         sensor_pose=pose.copy(),
         stamp=float(stamp),
         image_shape=image_shape,
     )
+    return cloud if image_shape is None else cloud.without_returns(~ok)
 
 
 def _shadowed(scene: Scene, source: np.ndarray, points: np.ndarray, ok: np.ndarray) -> np.ndarray:
