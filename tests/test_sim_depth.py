@@ -106,8 +106,7 @@ def test_holes_at_grazing_angles_and_on_dark_pixels():
     lost = ~np.isfinite(facing.points[:, 0])
     assert 0.5 * DARK_LOSS < lost.mean() < 3 * DARK_LOSS  # scattered dark pixels only
     assert (facing.role[lost] == ROLE_NONE).all() and (facing.surface[lost] == -1).all()
-    _, steep, _, _ = wall_scan(1.0, incidence_deg=82.0)
-    clean_steep, _, _, _ = wall_scan(1.0, incidence_deg=82.0)
+    clean_steep, steep, _, _ = wall_scan(1.0, incidence_deg=82.0)
     seen = np.isfinite(clean_steep.points[:, 0])
     assert (~np.isfinite(steep.points[seen, 0])).mean() > 0.6
 
