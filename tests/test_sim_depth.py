@@ -11,7 +11,7 @@ from supportnode.sim import ROLE_SURFACE, DepthCamera, Lidar, look_at, parse_noi
 from supportnode.sim.cloud import ROLE_NONE
 from supportnode.sim.depth_noise import DARK_LOSS, DISPARITY_STEP, KINECT_BASELINE, kinect_noise
 from supportnode.sim.files import read_sim_npz, write_sim_cloud
-from supportnode.sim.simulate import scans
+from supportnode.sim.simulate import sampled, scans
 
 TABLE = """
 primitives:
@@ -138,6 +138,8 @@ def test_kinect_spec_and_its_errors(table):
         parse_noise(["kinect:-1"])
     with pytest.raises(ConfigError, match="depth camera"):
         scans(table, Lidar(beams=4, columns=36), oblique(1.0)[None], noise=parse_noise(["kinect"]))
+    with pytest.raises(ConfigError, match="depth camera"):
+        sampled(table, 100, noise=parse_noise(["kinect"]))
     with pytest.raises(ValueError, match="organised"):
         kinect_noise(SMALL.scan(table, oblique(1.0)), table, SMALL, np.random.default_rng(0))
 

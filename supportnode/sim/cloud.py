@@ -95,13 +95,20 @@ class SimCloud:
     def without_returns(self, mask: np.ndarray) -> SimCloud:
         """The cloud with the rows where `mask` ((N,) bool) holds turned into pixels that
         returned nothing: NaN point, role ROLE_NONE, every label -1; order and shape kept."""
-        none = {
-            key: np.where(mask, -1, getattr(self, key)).astype(np.int32)
-            for key in ("primitive", "object", "surface", "supported_by", "support_surface")
-        }
-        points = np.where(mask[:, None], np.float32(np.nan), self.points).astype(np.float32)
-        role = np.where(mask, ROLE_NONE, self.role).astype(np.int8)
-        return replace(self, points=points, role=role, **none)
+
+        def none(labels: np.ndarray) -> np.ndarray:
+            return np.where(mask, -1, labels).astype(np.int32)
+
+        return replace(
+            self,
+            points=np.where(mask[:, None], np.float32(np.nan), self.points).astype(np.float32),
+            role=np.where(mask, ROLE_NONE, self.role).astype(np.int8),
+            primitive=none(self.primitive),
+            object=none(self.object),
+            surface=none(self.surface),
+            supported_by=none(self.supported_by),
+            support_surface=none(self.support_surface),
+        )
 
     def to_frame(self, frame: str) -> SimCloud:
         """The same cloud expressed in `frame` (one of FRAMES)."""

@@ -78,10 +78,18 @@ def read_sim_npz(path: str | Path) -> SimCloud:
                 stamp=float(z["stamp"]),
                 tilt_rotation=z["tilt_rotation"] if "tilt_rotation" in z else np.eye(3),
                 frame=str(z["frame"]) if "frame" in z else "world",
-                image_shape=tuple(int(v) for v in z["image_shape"]) if "image_shape" in z else None,
+                image_shape=_image_shape(z),
             )
     except (OSError, KeyError, ValueError) as err:
         raise CloudFormatError(f"{path}: not a simulator NPZ ({err})") from err
+
+
+def _image_shape(z: Any) -> tuple[int, int] | None:
+    """(rows, columns) of an organised cloud's NPZ, None for an unorganised one."""
+    if "image_shape" not in z:
+        return None
+    rows, cols = (int(v) for v in z["image_shape"])
+    return rows, cols
 
 
 def output_paths(out: str | Path, count: int) -> tuple[list[Path], Path | None]:

@@ -33,6 +33,8 @@ def finish(
 def sampled(scene: Scene, n_points: int, seed: int = 0, noise: NoiseSpec | None = None) -> SimCloud:
     """A mesh-sampled world-frame cloud of `n_points` (plus outliers if requested)."""
     noise = noise or NoiseSpec()
+    if noise.kinect > 0:
+        raise ConfigError("kinect noise follows a depth camera's pixels: scan with DepthCamera")
     cloud = sample_scene(scene, n_points, seed)
     # A separate stream for noise keeps the noise-free points identical across noise settings.
     return finish(cloud, scene, noise, np.random.default_rng([seed, 1]), "world")
@@ -52,15 +54,15 @@ def scans(
     organized: a depth camera's scans keep a row per pixel (NaN where nothing returns). The
     depth-camera noise (`kinect`) draws from its own stream, `(seed, frame index, 2)`."""
     noise = noise or NoiseSpec()
-    camera = isinstance(sensor, DepthCamera)
-    if (noise.kinect > 0 or organized) and not camera:
+    if (noise.kinect > 0 or organized) and not isinstance(sensor, DepthCamera):
         raise ConfigError("kinect noise and organised clouds need the depth camera")
     out = []
     for i, pose in enumerate(poses):
-        if not camera:
-            cloud = sensor.scan(scene, pose, stamp=i / sensor.rate)
+        stamp = i / sensor.rate
+        if isinstance(sensor, Lidar):
+            cloud = sensor.scan(scene, pose, stamp=stamp)
         else:
-            cloud = sensor.scan(scene, pose, i / sensor.rate, organized or noise.kinect > 0)
+            cloud = sensor.scan(scene, pose, stamp, organized or noise.kinect > 0)
             if noise.kinect > 0:
                 rng = np.random.default_rng([seed, i, 2])
                 cloud = kinect_noise(cloud, scene, sensor, rng, noise.kinect)
