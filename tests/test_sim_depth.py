@@ -13,6 +13,8 @@ from supportnode.sim.depth_noise import DARK_LOSS, DISPARITY_STEP, KINECT_BASELI
 from supportnode.sim.files import read_sim_npz, write_sim_cloud
 from supportnode.sim.simulate import sampled, scans
 
+TABLE_TOP = 0.75
+
 TABLE = """
 primitives:
   - {kind: box, name: floor, size: [4, 4, 0.02], xyz: [0, 0, -0.01], role: surface, surface: floor}
@@ -162,3 +164,33 @@ def test_optical_frame_and_npz_round_trip(table, tmp_path):
     again = read_sim_npz(path)
     assert again.image_shape == (120, 160) and again.frame == "optical"
     assert np.array_equal(again.points, opt.points, equal_nan=True)
+
+
+def test_lateral_noise_frays_edges_only(table):
+    cam = DepthCamera.preset("kinect")
+    pose = oblique(1.0)
+    clean = cam.scan(table, pose, organized=True)
+    noisy = kinect_noise(clean, table, cam, np.random.default_rng(5))
+    both = np.isfinite(clean.points[:, 0]) & np.isfinite(noisy.points[:, 0])
+    moved = both & (clean.primitive != noisy.primitive)  # a neighbour's surface measured
+    assert moved.sum() > 50
+    # On the open table the error off the plane is the axial noise and the disparity step
+    # alone, seen along the normal: no lateral jitter along the slope of the table.
+    ray = clean.points.astype(np.float64) - pose[:3, 3]
+    depth = ray @ pose[:3, 0]
+    # A depth error dz moves the point along its ray by dz |ray| / depth, off the table by
+    # that times the cosine of the incidence: |ray_z| / |ray|.
+    to_normal = np.abs(ray[:, 2]) / depth
+    sigma = 0.0012 + 0.0019 * (depth - 0.4) ** 2
+    step = depth**2 * DISPARITY_STEP / (cam.focal_px * KINECT_BASELINE)
+    expected = to_normal * np.sqrt(sigma**2 + step**2 / 12)
+    x, y = np.abs(clean.points[:, 0]), np.abs(clean.points[:, 1])
+    open_table = both & (clean.surface == 1) & (noisy.surface == 1) & (x > 0.2) & (x < 0.7)
+    open_table &= y < 0.4
+    err = (noisy.points[open_table, 2] - TABLE_TOP) / expected[open_table]
+    assert np.std(err) == pytest.approx(1.0, abs=0.1)
+    # Every measurement lies on its own pixel's ray.
+    rays = cam.directions() @ pose[:3, :3].T
+    offset = noisy.points[both].astype(np.float64) - pose[:3, 3]
+    along = np.einsum("ij,ij->i", offset, rays[both])
+    assert np.allclose(offset, along[:, None] * rays[both], atol=1e-4)

@@ -12,7 +12,8 @@ rounded to 1/8 px (Khoshelham and Elberink, "Accuracy and Resolution of Kinect D
 Indoor Mapping Applications", Sensors 12, 2012: with f = 525 px and b = 7.5 cm a step of 3.2 mm
 at 1 m and 7.1 mm at 1.5 m, growing with z^2). Holes (NaN) open where the sensor loses the
 pattern: at grazing angles, on depth edges, and on scattered dark pixels. Lateral noise moves a pixel's measurement to a
-neighbouring pixel's surface point (its depth and its ground truth), which is how edges fray.
+neighbouring pixel's surface point (its depth and its ground truth) near depth edges, which is
+how edges fray.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.ndimage import binary_dilation
 
 from supportnode.sim.cloud import SimCloud, rotate
 from supportnode.sim.scene_model import Scene
@@ -61,7 +63,8 @@ def kinect_noise(
         cos_inc = np.abs(np.einsum("ij,ij->i", normals, unit_ray))
     # Capped at 89 degrees: the model's terms diverge at 90 (such pixels are lost anyway).
     theta = np.arccos(np.clip(np.nan_to_num(cos_inc, nan=1.0), np.cos(np.radians(89.0)), 1.0))
-    src = _lateral_source(depth, theta, rows, cols, rng, scale)
+    edge = _edges(depth, rows, cols)
+    src = _lateral_source(theta, _near(edge, rows, cols), rows, cols, rng, scale)
     depth, theta = depth[src], theta[src]
     out = replace(cloud.select(src), image_shape=cloud.image_shape)  # labels of the source
     sigma = 0.0012 + 0.0019 * (depth - 0.4) ** 2
@@ -71,7 +74,7 @@ def kinect_noise(
     with np.errstate(invalid="ignore", divide="ignore"):
         disparity = np.round(fb / noisy / DISPARITY_STEP) * DISPARITY_STEP
         measured = fb / disparity
-    hole = _holes(depth, np.degrees(theta), rows, cols, rng) | ~(measured > 0)
+    hole = _holes(depth, np.degrees(theta), _edges(depth, rows, cols), rng) | ~(measured > 0)
     # The measurement lies on this pixel's ray, at the measured optical depth.
     pixel_ray = rotate(camera.directions(), cloud.sensor_pose[:3, :3])
     points = origin + pixel_ray * (measured / (pixel_ray @ axis))[:, None]
@@ -79,33 +82,35 @@ def kinect_noise(
 
 
 def _lateral_source(
-    depth: np.ndarray,
     theta: np.ndarray,
+    near_edge: np.ndarray,
     rows: int,
     cols: int,
     rng: np.random.Generator,
     scale: float,
 ) -> np.ndarray:
-    """(N,) index of the pixel whose surface point each pixel measures: itself shifted by
-    round(N(0, sigma_L)) pixels in each image direction, clipped to the image."""
+    """(N,) index of the pixel whose surface point each pixel measures: near a depth edge,
+    itself shifted by round(N(0, sigma_L)) pixels in each image direction (clipped to the
+    image); elsewhere itself. Nguyen et al. measured sigma_L at edges; on a smooth surface the
+    sensor's correlation window does not jitter (mOSD's tables: 1.1-1.3 mm off a local plane
+    at 0.8-0.95 m, as the axial sigma and the disparity steps alone give)."""
     sigma_px = scale * (0.8 + 0.035 * theta / (np.pi / 2 - theta))
     n = rows * cols
     du = np.rint(sigma_px * rng.standard_normal(n)).astype(np.int64)
     dv = np.rint(sigma_px * rng.standard_normal(n)).astype(np.int64)
+    du[~near_edge] = 0
+    dv[~near_edge] = 0
     r, c = np.divmod(np.arange(n), cols)
     return np.clip(r + dv, 0, rows - 1) * cols + np.clip(c + du, 0, cols - 1)
 
 
-def _holes(
-    depth: np.ndarray, theta_deg: np.ndarray, rows: int, cols: int, rng: np.random.Generator
-) -> np.ndarray:
-    """(N,) bool: pixels that return nothing (grazing, edge and dark pixels; already NaN)."""
-    lo, hi = GRAZING_DEG
-    p_lost = np.clip((theta_deg - lo) / (hi - lo), 0.0, 1.0)
+def _edges(depth: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """(N,) bool: pixels whose depth differs from a 4-neighbour's by more than EDGE_JUMP
+    (relative), or whose neighbour returned nothing."""
     img = depth.reshape(rows, cols)
     jump = np.zeros((rows, cols))
     with np.errstate(invalid="ignore"):
-        for axis in (0, 1):  # the largest relative step to a 4-neighbour; NaN neighbours count
+        for axis in (0, 1):
             step = np.abs(np.diff(img, axis=axis)) / np.fmin(
                 np.delete(img, -1, axis=axis), np.delete(img, 0, axis=axis)
             )
@@ -114,6 +119,20 @@ def _holes(
             pad_hi = [(0, 1) if a == axis else (0, 0) for a in (0, 1)]
             jump = np.maximum(jump, np.pad(step, pad_lo))
             jump = np.maximum(jump, np.pad(step, pad_hi))
-    edge = jump.reshape(-1) > EDGE_JUMP
+    return jump.reshape(-1) > EDGE_JUMP
+
+
+def _near(mask: np.ndarray, rows: int, cols: int, radius: int = 2) -> np.ndarray:
+    """(N,) bool: pixels within `radius` pixels (a square) of a pixel in `mask`."""
+    grown = binary_dilation(mask.reshape(rows, cols), np.ones((2 * radius + 1,) * 2, bool))
+    return grown.reshape(-1)
+
+
+def _holes(
+    depth: np.ndarray, theta_deg: np.ndarray, edge: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
+    """(N,) bool: pixels that return nothing (grazing, edge and dark pixels; already NaN)."""
+    lo, hi = GRAZING_DEG
+    p_lost = np.clip((theta_deg - lo) / (hi - lo), 0.0, 1.0)
     p_lost = np.maximum(p_lost, np.where(edge, EDGE_LOSS, DARK_LOSS))
     return (rng.random(depth.size) < p_lost) | ~np.isfinite(depth)
