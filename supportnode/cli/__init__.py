@@ -11,6 +11,22 @@ from collections.abc import Sequence
 from supportnode import __version__
 from supportnode.errors import SupportNodeError
 
+DESCRIPTION = """\
+Find support surfaces (floors, table tops, shelf boards) and the objects standing on them in
+point clouds: offline on files and recordings, or live as a ZeroMQ node beside your robot's
+software."""
+
+EXAMPLES = """\
+examples:
+  supportnode launch demo --duration 20         the live demo: a replayed lidar, the node, a planner
+  supportnode detect scan.pcd --render          surfaces and objects of one cloud, into out/scan/
+  supportnode detect run.mcap --every 5         every 5th scan of a recording (also .bag, .db3, folders)
+  supportnode run --input run.mcap --output results.mcap   the node offline, as fast as it can
+  supportnode run --config my.yaml              the node live: scans in on :5555, results out on :5556
+  supportnode config dump -o my.yaml            every parameter with its default, unit and range
+
+'supportnode COMMAND --help' tells a command's options; docs/cli.md has the details."""
+
 # name -> (module, one-line help). Each module defines `add_arguments(parser)` and `run(args) -> int`;
 # modules are imported only when their command runs, so optional extras stay optional.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -30,13 +46,19 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "hz": ("supportnode.cli.hz", "rate, period jitter and bandwidth of a topic, once a second"),
     "keys": ("supportnode.cli.keys", "make a CURVE key pair for encrypted, authenticated sockets"),
     "view": ("supportnode.cli.view", "show the node's topics or a recording live in Foxglove"),
+    "config": ("supportnode.cli.config", "print the default configuration, list shipped files"),
 }
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The argument parser; only ``command``'s module is imported (for its arguments), so one
     command's optional dependencies never stand in the way of another."""
-    parser = argparse.ArgumentParser(prog="supportnode", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="supportnode",
+        description=DESCRIPTION,
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--version", action="version", version=f"supportnode {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module_name, help_text) in COMMANDS.items():

@@ -10,7 +10,10 @@ def add_config_arguments(parser: argparse.ArgumentParser, example: str) -> None:
 
     example: a typical override for this command's help text, e.g. ``surfaces.method=seed``."""
     parser.add_argument(
-        "--config", metavar="YAML", help="configuration file (see config/default.yaml)"
+        "--config",
+        metavar="YAML",
+        help="configuration file; 'supportnode config dump -o my.yaml' writes every key "
+        "with its default, unit and range to start from",
     )
     parser.add_argument(
         "--set",
