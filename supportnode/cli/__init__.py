@@ -82,7 +82,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SupportNodeError as err:
         print(f"supportnode {args.command}: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
+        detail = getattr(err, "detail", "")  # cli._console.Interrupted: what was left behind
+        print(
+            f"supportnode {args.command}: interrupted" + (f" {detail}" if detail else ""),
+            file=sys.stderr,
+        )
         return 130
 
 

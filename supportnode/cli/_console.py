@@ -17,11 +17,21 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-__all__ = ["Progress", "print_table", "progress"]
+__all__ = ["Interrupted", "Progress", "print_table", "progress"]
 
 # Pipes and logs get wide tables rather than rich's 80 columns: nothing is cut.
 _PIPE_WIDTH = 160
 _PLAIN_EVERY_S = 5.0
+# Jobs shorter than this print no progress lines (they are done before anyone waits), s.
+_PLAIN_AFTER_S = 1.0
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a job, with what it leaves behind (``main`` prints it in one line)."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(detail)
+        self.detail = detail
 
 
 def stdout_console() -> Console:
@@ -88,6 +98,8 @@ class Progress:
     def _plain(self, note: str | None) -> None:
         now = time.monotonic()
         share = self.done / self.total if self.total else 0.0
+        if now - self._t0 < _PLAIN_AFTER_S:
+            return
         if now - self._last_line < _PLAIN_EVERY_S and share - self._last_share < 0.1:
             return
         self._last_line, self._last_share = now, share

@@ -1,17 +1,25 @@
-"""`supportnode detect CLOUD`: surfaces, objects and free space in one cloud file."""
+"""`supportnode detect CLOUD`: surfaces, objects and free space in one cloud file, or in every
+scan of a recording (MCAP, ROS 2, ROS 1) or folder of clouds."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import statistics
 import time
 from pathlib import Path
+from typing import Any
 
-from supportnode.cli._common import add_config_arguments
+from supportnode.cli._common import add_config_arguments, int_at_least, positive_seconds
+from supportnode.cli._console import Interrupted, print_table, progress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("cloud", help="point cloud file (.ply .pcd .xyz .txt .csv .npy .npz .obj)")
+    parser.add_argument(
+        "cloud",
+        help="point cloud file (.ply .pcd .xyz .txt .csv .npy .npz .obj .las .laz), or a "
+        "sequence: a recording (.mcap .bag .db3), a ROS 2 bag folder or a folder of clouds",
+    )
     add_config_arguments(parser, "surfaces.method=seed")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: out/<cloud name>)")
     parser.add_argument(
@@ -30,6 +38,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--render", action="store_true", help="also draw result.png (needs the viz extra)"
     )
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    seq = parser.add_argument_group("sequences (recordings and folders)")
+    seq.add_argument("--topic", help="PointCloud topic to read (default: the only one, or scan)")
+    seq.add_argument(
+        "--every", type=int_at_least(1), default=1, metavar="N", help="every N-th scan only"
+    )
+    seq.add_argument(
+        "--start", type=float, default=0.0, metavar="S", help="skip the first S seconds"
+    )
+    seq.add_argument(
+        "--duration", type=positive_seconds, metavar="S", help="read S seconds from --start"
+    )
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -43,63 +62,184 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from supportnode.config import config_to_dict, load_config
+    from supportnode.config import load_config
+    from supportnode.io.scans import is_sequence
+
+    params = load_config(args.config, args.overrides)
+    name = Path(args.cloud).stem
+    out_dir = Path(args.out) if args.out else Path("out") / name
+    if is_sequence(args.cloud):
+        return _run_sequence(args, params, out_dir)
+    return _run_cloud(args, params, name, out_dir)
+
+
+# ---------------------------------------------------------------------------- one cloud
+
+
+def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) -> int:
+    from supportnode.config import config_to_dict
     from supportnode.io.clouds import read_cloud
     from supportnode.io.results import write_detection
     from supportnode.pipeline import detect
 
     t0 = time.perf_counter()
-    params = load_config(args.config, args.overrides)
-    t = time.perf_counter()
-    cloud = read_cloud(args.cloud)
-    read_time = time.perf_counter() - t
-    name = Path(args.cloud).stem
-    out_dir = Path(args.out) if args.out else Path("out") / name
-    detection = detect(
-        cloud.points,
-        params,
-        align=args.align,
-        objects=not args.no_objects,
-        sensor_origin=args.sensor_origin,
-    )
-    detection.timings = {"read": read_time, **detection.timings}
-    points = cloud.points if detection.rotation is None else cloud.points @ detection.rotation.T
-    t = time.perf_counter()
-    written = write_detection(out_dir, name, cloud, points, detection, config_to_dict(params))
-    if args.render:
-        from supportnode.render import render_result
+    stages = 3 + bool(args.render)
+    with progress(f"detect {args.cloud}", stages, "stages", args.quiet) as bar:
+        bar.advance(0, "reading")
+        t = time.perf_counter()
+        cloud = read_cloud(args.cloud)
+        read_time = time.perf_counter() - t
+        bar.advance(1, f"detecting in {len(cloud.points):,} points")
+        detection = detect(
+            cloud.points,
+            params,
+            align=args.align,
+            objects=not args.no_objects,
+            sensor_origin=args.sensor_origin,
+        )
+        detection.timings = {"read": read_time, **detection.timings}
+        points = cloud.points if detection.rotation is None else cloud.points @ detection.rotation.T
+        bar.advance(1, "writing")
+        t = time.perf_counter()
+        try:
+            write_detection(out_dir, name, cloud, points, detection, config_to_dict(params))
+            if args.render:
+                from supportnode.render import render_result
 
-        written.append(render_result(out_dir, out_dir / "result.png"))
-    write_time = time.perf_counter() - t
+                bar.advance(1, "rendering")
+                render_result(out_dir, out_dir / "result.png")
+        except KeyboardInterrupt as err:
+            raise Interrupted(f"while writing: partial output left in {out_dir}/") from err
+        write_time = time.perf_counter() - t
+        bar.advance(1)
     if not args.quiet:
-        print(_summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0))
+        _summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0)
     return 0
 
 
-def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -> str:
-    lines = [
+def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -> None:
+    dropped = cloud.dropped_nonfinite
+    print(
         f"{path}: {len(cloud.points):,} points"
-        + (
-            f" ({cloud.dropped_nonfinite:,} NaN/Inf rows dropped)"
-            if cloud.dropped_nonfinite
-            else ""
-        )
-    ]
-    if detection.gravity is not None:
-        lines.append(f"gravity: tilt {detection.gravity.tilt_deg:.2f} deg corrected")
-    free = {f.surface_id: f for f in detection.free_space}
-    lines.append(
-        f"{'surface':>7} {'height m':>9} {'area m2':>8} {'points':>9} {'free m2':>8} {'disc r m':>8}"
+        + (f" ({dropped:,} NaN/Inf rows dropped)" if dropped else "")
     )
+    if cloud.origin is not None:
+        print(
+            "origin: " + ", ".join(f"{v:.3f}" for v in cloud.origin) + " subtracted (result.json)"
+        )
+    if detection.gravity is not None:
+        print(f"gravity: tilt {detection.gravity.tilt_deg:.2f} deg corrected")
+    free = {f.surface_id: f for f in detection.free_space}
+    rows = []
     for s in detection.surfaces.surfaces:
         f = free.get(s.id)
-        fa = f"{f.free_area:8.2f}" if f else f"{'-':>8}"
-        fr = f"{f.disc_radius:8.2f}" if f else f"{'-':>8}"
-        lines.append(f"{s.id:>7} {s.height:9.3f} {s.area:8.2f} {s.point_count:9,} {fa} {fr}")
+        rows.append(
+            (
+                s.id,
+                f"{s.height:.3f}",
+                f"{s.area:.2f}",
+                f"{s.point_count:,}",
+                f"{f.free_area:.2f}" if f else "-",
+                f"{f.disc_radius:.2f}" if f else "-",
+            )
+        )
+    print_table(("surface", "height m", "area m2", "points", "free m2", "disc r m"), rows)
     if detection.objects is not None:
         on = sum(c.surface_id is not None for c in detection.objects.clusters)
-        lines.append(f"objects: {len(detection.objects.clusters)} clusters ({on} on a surface)")
+        print(f"objects: {len(detection.objects.clusters)} clusters ({on} on a surface)")
     stages = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in detection.timings.items())
-    lines.append(f"time: {stages}, write {write_time * 1000:.0f} ms; total {total:.2f} s")
-    lines.append(f"wrote {out_dir}/ (result.json, labels.npz, *_detected.ply, *_not_detected.ply)")
-    return "\n".join(lines)
+    print(f"time: {stages}, write {write_time * 1000:.0f} ms; total {total:.2f} s")
+    print(f"wrote {out_dir}/ (result.json, labels.npz, *_detected.ply, *_not_detected.ply)")
+
+
+# ---------------------------------------------------------------------------- sequences
+
+
+def _run_sequence(args: argparse.Namespace, params: Any, out_dir: Path) -> int:
+    import sys
+
+    from supportnode.io.scans import ScanSelection
+    from supportnode.io.sequence import SequenceResults
+    from supportnode.io.sources import open_source
+
+    if args.render or args.sensor_origin is not None:
+        from supportnode.errors import SupportNodeError
+
+        raise SupportNodeError(
+            "--render and --sensor-origin are for one cloud; a sequence's scans carry their poses"
+        )
+    selection = ScanSelection(args.topic, args.every, args.start, args.duration)
+    t0 = time.perf_counter()
+    per_scan: list[tuple[int, int, float]] = []  # surfaces, objects, seconds
+    with open_source(args.cloud) as source:
+        topic = selection.pick_topic(source)
+        total = selection.expected(source, topic)
+        with (
+            SequenceResults(out_dir / "results.mcap", out_dir / "results.jsonl") as results,
+            progress(f"detect {args.cloud}", total, "scans", args.quiet) as bar,
+        ):
+            try:
+                for scan in selection.scans(source, topic):
+                    per_scan.append(_detect_scan(scan, params, args, results))
+                    bar.advance(1)
+            except KeyboardInterrupt as err:
+                raise Interrupted(
+                    f"after {results.scans} scans; their results are in "
+                    f"{results.mcap_path} and {results.jsonl_path}"
+                ) from err
+        warnings = list(source.warnings)
+    for w in warnings:
+        print(f"supportnode detect: warning: {w}", file=sys.stderr)
+    if not args.quiet:
+        _sequence_summary(args.cloud, topic, per_scan, selection, out_dir, time.perf_counter() - t0)
+    return 0
+
+
+def _detect_scan(scan: Any, params: Any, args: argparse.Namespace, results: Any) -> tuple:
+    """One scan of a sequence, in its pose's frame when it has one (the map frame)."""
+    from supportnode.detection.policy import is_safe
+    from supportnode.geometry.transform import pose_matrix, transform_points
+    from supportnode.msgs import ObstacleClusters, SupportSurfaces
+    from supportnode.pipeline import detect
+
+    t = time.perf_counter()
+    points, origin, frame = scan.points, None, scan.frame_id
+    if scan.pose is not None:
+        pose = pose_matrix(scan.pose.translation, scan.pose.rotation)
+        points = transform_points(points, pose[:3, :3], pose[:3, 3])
+        origin, frame = pose[:3, 3], params.node.frame_id
+    det = detect(
+        points, params, align=args.align, objects=not args.no_objects, sensor_origin=origin
+    )
+    surfaces = det.surfaces.surfaces
+    safe = [is_safe(s, params.safe) for s in surfaces]
+    msg_s = SupportSurfaces.from_detection(
+        surfaces, det.free_space, scan.stamp, frame, scan.seq, safe=safe
+    )
+    clusters = det.objects.clusters if det.objects is not None else []
+    msg_o = ObstacleClusters.from_detection(clusters, scan.stamp, frame, scan.seq)
+    results.write(scan, msg_s, msg_o if det.objects is not None else None, det.timings)
+    return len(surfaces), len(clusters), time.perf_counter() - t
+
+
+def _sequence_summary(path, topic, per_scan, selection, out_dir: Path, total: float) -> None:
+    skipped = ", ".join(f"{n} {why}" for why, n in selection.skipped.items())
+    print(
+        f"{path}: {len(per_scan)} scans on topic {topic!r}"
+        + (f" ({skipped} skipped)" if skipped else "")
+    )
+    if per_scan:
+        s, o, t = zip(*per_scan, strict=True)
+        rows = [
+            ("surfaces", min(s), f"{statistics.median(s):g}", max(s)),
+            ("objects", min(o), f"{statistics.median(o):g}", max(o)),
+            (
+                "ms per scan",
+                f"{min(t) * 1e3:.0f}",
+                f"{statistics.median(t) * 1e3:.0f}",
+                f"{max(t) * 1e3:.0f}",
+            ),
+        ]
+        print_table(("per scan", "min", "median", "max"), rows)
+    print(f"time: total {total:.2f} s")
+    print(f"wrote {out_dir}/results.mcap (surfaces, obstacles) and {out_dir}/results.jsonl")

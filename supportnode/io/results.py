@@ -75,6 +75,9 @@ def write_detection(
             "rows": int(cloud.input_count),
             "points": len(points),
             "dropped_nonfinite": int(cloud.dropped_nonfinite),
+            # metres subtracted from the file's coordinates (LAS/LAZ survey coordinates):
+            # add it to every position in this file to get the file's frame back
+            "origin": None if cloud.origin is None else [float(v) for v in cloud.origin],
         },
         "params": params_dict,
         **(extra or {}),

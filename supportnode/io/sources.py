@@ -28,6 +28,7 @@ import numpy as np
 
 from supportnode._closing import Closing
 from supportnode.errors import CloudFormatError, ProtocolError, SupportNodeError
+from supportnode.io.clouds import READ_EXTENSIONS
 from supportnode.io.recording import McapFile, RecordingError
 from supportnode.msgs import Limits, Message, PointCloud, decode_any
 
@@ -40,7 +41,7 @@ __all__ = [
     "open_source",
 ]
 
-CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz", ".txt", ".csv", ".npy", ".npz", ".obj")
+CLOUD_EXTENSIONS = READ_EXTENSIONS
 
 
 @dataclass
@@ -89,6 +90,10 @@ class Source(ABC, Closing):
 
     def duration(self) -> float | None:
         """Seconds from the first to the last message, when known without reading them all."""
+        return None
+
+    def count(self, topic: str) -> int | None:
+        """Messages on ``topic``, when known without reading them all."""
         return None
 
     @abstractmethod
@@ -175,6 +180,13 @@ class McapSource(Source):
             return None
         return (st.end_time - st.start_time) * 1e-9
 
+    def count(self, topic: str) -> int | None:
+        counts = self.file.stats.channel_counts
+        ids = [c.id for c in self.file.channels.values() if c.topic == topic]
+        if not self.file.indexed or not all(i in counts for i in ids):
+            return None
+        return sum(counts[i] for i in ids)
+
     def messages(
         self,
         topics: Collection[str] | None = None,
@@ -250,6 +262,9 @@ class RosbagSource(Source):
         if self.bag.start_time is None or self.bag.end_time is None:
             return None
         return max(0.0, (self.bag.end_time - self.bag.start_time) * 1e-9)
+
+    def count(self, topic: str) -> int | None:
+        return self.bag.topics[topic][1] if topic in self._clouds else 0
 
     def messages(
         self,
@@ -351,6 +366,9 @@ class FolderSource(Source):
 
     def duration(self) -> float | None:
         return self.times()[-1] - self.times()[0]
+
+    def count(self, topic: str) -> int | None:
+        return len(self.files) if topic == self.topic else 0
 
     def messages(
         self,

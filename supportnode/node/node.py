@@ -59,7 +59,7 @@ from supportnode.detection.policy import is_safe
 from supportnode.errors import AlignmentError, InputError, ProtocolError, SupportNodeError
 from supportnode.geometry.gravity import estimate_gravity, rotation_to_z
 from supportnode.geometry.memo import Memo
-from supportnode.geometry.transform import transform_points
+from supportnode.geometry.transform import quaternion_matrix, transform_points
 from supportnode.msgs import (
     Diagnostics,
     Limits,
@@ -168,18 +168,6 @@ class _Job:
     t_recv: float = 0.0  # perf_counter when it was received (threaded spin)
     t_ready: float = 0.0  # perf_counter when it was merged and handed to detection
     merge: int = 0  # number of its merge into the map (Node._merges after it)
-
-
-def quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of the unit quaternion ``q`` = (x, y, z, w)."""
-    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 class _Gravity:
