@@ -60,3 +60,26 @@ def int_at_least(low: int):
         return value
 
     return parse
+
+
+def add_tf_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--fixed-frame`` and ``--tf-tolerance``: poses of ROS bag scans from their /tf."""
+    group = parser.add_argument_group("ROS bags with /tf")
+    group.add_argument(
+        "--fixed-frame",
+        metavar="FRAME",
+        help="frame the scans' poses are given in, e.g. odom or map (default: the tf tree's root)",
+    )
+    group.add_argument(
+        "--tf-tolerance",
+        type=positive_seconds,
+        default=0.1,
+        metavar="S",
+        help="extrapolate a transform at most S seconds past its samples, else skip the scan "
+        "(counted; default 0.1)",
+    )
+
+
+def tf_options(args: argparse.Namespace) -> dict[str, object]:
+    """The `open_source` keywords of `add_tf_arguments`."""
+    return {"fixed_frame": args.fixed_frame, "tf_tolerance": args.tf_tolerance}

@@ -10,7 +10,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from supportnode.cli._common import add_config_arguments, int_at_least, positive_seconds
+from supportnode.cli._common import (
+    add_config_arguments,
+    add_tf_arguments,
+    int_at_least,
+    positive_seconds,
+    tf_options,
+)
 from supportnode.cli._console import Interrupted, print_table, progress
 
 
@@ -49,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     seq.add_argument(
         "--duration", type=positive_seconds, metavar="S", help="read S seconds from --start"
     )
+    add_tf_arguments(parser)
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -171,7 +178,7 @@ def _run_sequence(args: argparse.Namespace, params: Any, out_dir: Path) -> int:
     selection = ScanSelection(args.topic, args.every, args.start, args.duration)
     t0 = time.perf_counter()
     per_scan: list[tuple[int, int, float]] = []  # surfaces, objects, seconds
-    with open_source(args.cloud) as source:
+    with open_source(args.cloud, **tf_options(args)) as source:
         topic = selection.pick_topic(source)
         total = selection.expected(source, topic)
         with (

@@ -13,7 +13,13 @@ import logging
 import sys
 from pathlib import Path
 
-from supportnode.cli._common import add_config_arguments, int_at_least, positive_seconds
+from supportnode.cli._common import (
+    add_config_arguments,
+    add_tf_arguments,
+    int_at_least,
+    positive_seconds,
+    tf_options,
+)
 from supportnode.cli._console import Interrupted, print_table, progress
 
 
@@ -46,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--start", type=float, default=0.0, metavar="S", help="skip the first S seconds"
     )
     offline.add_argument("--quiet", action="store_true", help="no progress or summary")
+    add_tf_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -99,7 +106,7 @@ def _run_offline(args: argparse.Namespace, params) -> int:
     output = Path(args.output)
     t0 = time.perf_counter()
     detections = 0
-    with open_source(args.input) as source, Node(params) as node:
+    with open_source(args.input, **tf_options(args)) as source, Node(params) as node:
         topic = selection.pick_topic(source)
         with (
             SequenceResults(output, output.with_suffix(".jsonl")) as results,

@@ -74,6 +74,7 @@ class Source(ABC, Closing):
         self.path = os.fspath(path)
         self.warnings: list[str] = []
         self._warned: set[str] = set()
+        self.skipped: dict[str, int] = {}  # reason -> scans left out (e.g. "tf late")
 
     def warn_once(self, key: str, text: str) -> None:
         if key not in self._warned:
@@ -235,18 +236,32 @@ class McapSource(Source):
 
 
 class RosbagSource(Source):
-    """A ROS 1 or ROS 2 bag: its PointCloud2 topics as PointCloud messages (needs rosbags)."""
+    """A ROS 1 or ROS 2 bag: its PointCloud2 topics as PointCloud messages (needs rosbags).
+
+    When the bag has ``/tf`` (``tf2_msgs/TFMessage``), each scan gets its pose in
+    ``fixed_frame`` (None: the root of the tree) at its stamp, and its gravity from
+    ``sensor_msgs/Imu`` near rest; a scan without a transform within ``tf_tolerance`` s is
+    skipped and counted in ``skipped`` ("tf missing", "tf late")."""
 
     kind = "rosbag"
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        fixed_frame: str | None = None,
+        tf_tolerance: float = 0.1,
+    ) -> None:
         super().__init__(path)
-        from supportnode.io.rosbag import POINTCLOUD2_TYPES, RosBag
+        from supportnode.io.rosbag import IMU_TYPES, POINTCLOUD2_TYPES, TF_TYPES, RosBag
 
         self.bag = RosBag(self.path)
         self._clouds = {t for t, (typ, _) in self.bag.topics.items() if typ in POINTCLOUD2_TYPES}
+        self.poser = self.bag.poser(fixed_frame, tf_tolerance)
+        used = self._clouds | {
+            t for t, (typ, _) in self.bag.topics.items() if typ in TF_TYPES | IMU_TYPES
+        }
         for t, (typ, _) in sorted(self.bag.topics.items()):
-            if t not in self._clouds:
+            if t not in used:
                 self.warn_once(
                     f"skip:{t}",
                     f"{self.path}: topic {t!r} skipped ({typ}: only sensor_msgs/PointCloud2 plays)",
@@ -273,6 +288,7 @@ class RosbagSource(Source):
         duration: float | None = None,
     ) -> Iterator[SourceMessage]:
         from supportnode.io.rosbag import PointCloud2Error
+        from supportnode.io.tf import TfError
 
         begin, end = self._window(start, duration)
         if begin is None:
@@ -287,7 +303,16 @@ class RosbagSource(Source):
             notes: list[str] = []
             try:
                 cloud = self.bag.pointcloud(m, seq=seq, warnings=notes)
+                if self.poser is not None:
+                    cloud = self.poser.apply(cloud)
                 frames = list(cloud.encode(m.topic))
+            except TfError as err:
+                self.skipped[err.reason] = self.skipped.get(err.reason, 0) + 1
+                self.warn_once(
+                    f"tf:{err.reason}",
+                    f"{self.path}: topic {m.topic!r}: scans skipped, {err.reason}: {err}",
+                )
+                continue
             except (PointCloud2Error, ProtocolError) as err:
                 self.warn_once(f"bad:{m.topic}", f"{self.path}: topic {m.topic!r}: {err} (skipped)")
                 continue
@@ -441,11 +466,18 @@ class FolderSource(Source):
 
 
 def open_source(
-    path: str | os.PathLike[str], *, topic: str = "scan", hz: float = 10.0, frame_id: str = "map"
+    path: str | os.PathLike[str],
+    *,
+    topic: str = "scan",
+    hz: float = 10.0,
+    frame_id: str = "map",
+    fixed_frame: str | None = None,
+    tf_tolerance: float = 0.1,
 ) -> Source:
     """The source for ``path``, chosen by extension or folder contents (see the module doc).
 
-    ``topic``, ``hz``, ``frame_id``: for folders of clouds only. Raises a SupportNodeError
+    ``topic``, ``hz``, ``frame_id``: for folders of clouds only; ``fixed_frame``,
+    ``tf_tolerance``: for ROS bags with tf (see `RosbagSource`). Raises a SupportNodeError
     (RecordingError, RosbagError, ...) with one line when the path cannot be a source.
     """
     name = os.fspath(path)
@@ -454,13 +486,13 @@ def open_source(
         raise RecordingError(f"{name}: no such file or folder")
     if p.is_dir():
         if (p / "metadata.yaml").exists():
-            return RosbagSource(p)
+            return RosbagSource(p, fixed_frame, tf_tolerance)
         return FolderSource(p, topic=topic, hz=hz, frame_id=frame_id)
     ext = p.suffix.lower()
     if ext == ".mcap":
         return McapSource(p)
     if ext in (".bag", ".db3"):
-        return RosbagSource(p)
+        return RosbagSource(p, fixed_frame, tf_tolerance)
     raise RecordingError(
         f"{name}: unknown recording type {p.suffix!r} (expected .mcap, .bag, .db3, a ROS 2 bag "
         "folder or a folder of cloud files)"
