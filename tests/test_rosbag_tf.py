@@ -233,3 +233,18 @@ def test_tf_buffer_chain_inverse_and_errors() -> None:
     with pytest.raises(TfError) as missing:
         tf.lookup("map", "camera", 0.5, 0.1)
     assert missing.value.reason == "tf missing"
+
+
+def test_detect_on_a_bag_counts_the_skipped_scans(bag: Path, tmp_path: Path, capsys) -> None:
+    import json
+
+    from supportnode.cli import main
+
+    out = tmp_path / "o"
+    assert main(["detect", str(bag), "--out", str(out), "--no-objects"]) == 0
+    printed = capsys.readouterr()
+    assert "6 scans on topic '/points' (1 tf missing, 1 tf late skipped)" in printed.out
+    lines = [json.loads(x) for x in (out / "results.jsonl").read_text().splitlines()]
+    assert all(x["frame_id"] == "map" for x in lines)
+    for x in lines:  # in the fixed frame: the table at its height in every scan
+        assert any(abs(s["height"] - TABLE[4]) < 0.02 for s in x["surfaces"])

@@ -56,7 +56,8 @@ class ScanSelection:
         )
 
     def scans(self, source: Source, topic: str) -> Iterator[PointCloud]:
-        """The selected scans, decoded; one that does not decode is skipped and counted."""
+        """The selected scans, decoded; one that does not decode is skipped and counted, and
+        so are those the source skipped (``skipped``, once the scans are all read)."""
         limits = Limits()
         for i, m in enumerate(source.messages([topic], self.start, self.duration)):
             if i % self.every:
@@ -69,6 +70,8 @@ class ScanSelection:
                 continue
             if isinstance(msg, PointCloud):
                 yield msg
+        for why, n in source.skipped.items():  # e.g. scans without a transform (ROS bags)
+            self.skipped[why] = self.skipped.get(why, 0) + n
 
     def expected(self, source: Source, topic: str) -> int | None:
         """How many scans the selection will give, when the source knows its counts."""
