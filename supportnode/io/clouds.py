@@ -57,8 +57,11 @@ class Cloud:
 # ------------------------------------------------------------------------------------- reading
 
 
-def read_cloud(path: str | os.PathLike[str]) -> Cloud:
+def read_cloud(path: str | os.PathLike[str], allow_empty: bool = False) -> Cloud:
     """Read a point cloud, choosing the format by extension (case-insensitive).
+
+    allow_empty: a file without rows is a Cloud of 0 points (our outputs can be: nothing
+    detected), not an error.
 
     Supported: .ply .pcd .xyz .txt .csv .npy .npz .obj .las .laz. Raises CloudFormatError on a missing,
     unreadable, malformed, truncated or empty file (including one whose points are all NaN/Inf).
@@ -81,12 +84,15 @@ def read_cloud(path: str | os.PathLike[str]) -> Cloud:
         raise CloudFormatError(f"{name}: cannot read ({err.strerror or err})") from err
     except MemoryError as err:
         raise CloudFormatError(f"{name}: too large to load into memory") from err
-    return _finish(raw, name)
+    return _finish(raw, name, allow_empty)
 
 
-def _finish(raw: RawCloud, name: str) -> Cloud:
+def _finish(raw: RawCloud, name: str, allow_empty: bool = False) -> Cloud:
     xyz = raw.xyz
     n = xyz.shape[0]
+    if n == 0 and allow_empty:
+        empty = np.zeros(0, np.int64)
+        return Cloud(np.zeros((0, 3)), dict(raw.fields), empty, 0, 0, path=name)
     if n == 0:
         raise CloudFormatError(f"{name}: no points")
     finite = np.isfinite(xyz).all(axis=1)
