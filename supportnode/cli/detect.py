@@ -43,6 +43,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--render", action="store_true", help="also draw result.png (needs the viz extra)"
     )
+    parser.add_argument(
+        "--view",
+        nargs="?",
+        const="spawn",
+        choices=("spawn", "web"),
+        help="show the result in Rerun (needs the rerun extra): its viewer app (default), or "
+        "'web': serve the web viewer from this machine and print its URL",
+    )
+    parser.add_argument("--save", metavar="FILE.rrd", help="write the Rerun scene to a file")
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
     seq = parser.add_argument_group("sequences (recordings and folders)")
     seq.add_argument("--topic", help="PointCloud topic to read (default: the only one, or scan)")
@@ -121,7 +130,44 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         bar.advance(1)
     if not args.quiet:
         _summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0)
+    if args.view or args.save:
+        _rerun(args, params, points, detection)
     return 0
+
+
+def _rerun(args: argparse.Namespace, params: Any, points: Any, detection: Any) -> None:
+    """The cloud (surface points red, objects by id, the rest grey) and what was found."""
+    import numpy as np
+
+    from supportnode.detection.messages import detection_messages
+    from supportnode.view.rerun_scene import RerunScene
+
+    colors = np.full((len(points), 3), 150, np.uint8)
+    if detection.objects is not None:
+        obj = detection.objects.labels
+        palette = np.random.default_rng(0).integers(40, 230, (max(int(obj.max()) + 1, 1), 3))
+        colors[obj >= 0] = palette[obj[obj >= 0]]
+    colors[detection.surfaces.labels >= 0] = (220, 50, 50)
+    surfaces, obstacles = detection_messages(detection, params.safe, 0.0, "cloud")
+    with RerunScene("save" if args.save else args.view, args.save) as scene:
+        scene.log_points(0.0, points, colors)
+        scene.log_surfaces(surfaces)
+        if obstacles is not None:
+            scene.log_obstacles(obstacles)
+        if scene.url is not None:
+            print(f"rerun: open {scene.url}  (Ctrl-C to stop)", flush=True)
+            _wait_for_ctrl_c()
+    if args.save and not args.quiet:
+        print(f"wrote {args.save} (open it with: rerun {args.save})")
+
+
+def _wait_for_ctrl_c() -> None:
+    import threading
+
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
 
 
 def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -> None:
@@ -204,9 +250,8 @@ def _run_sequence(args: argparse.Namespace, params: Any, out_dir: Path) -> int:
 
 def _detect_scan(scan: Any, params: Any, args: argparse.Namespace, results: Any) -> tuple:
     """One scan of a sequence, in its pose's frame when it has one (the map frame)."""
-    from supportnode.detection.policy import is_safe
+    from supportnode.detection.messages import detection_messages
     from supportnode.geometry.transform import pose_matrix, transform_points
-    from supportnode.msgs import ObstacleClusters, SupportSurfaces
     from supportnode.pipeline import detect
 
     t = time.perf_counter()
@@ -218,15 +263,10 @@ def _detect_scan(scan: Any, params: Any, args: argparse.Namespace, results: Any)
     det = detect(
         points, params, align=args.align, objects=not args.no_objects, sensor_origin=origin
     )
-    surfaces = det.surfaces.surfaces
-    safe = [is_safe(s, params.safe) for s in surfaces]
-    msg_s = SupportSurfaces.from_detection(
-        surfaces, det.free_space, scan.stamp, frame, scan.seq, safe=safe
-    )
-    clusters = det.objects.clusters if det.objects is not None else []
-    msg_o = ObstacleClusters.from_detection(clusters, scan.stamp, frame, scan.seq)
-    results.write(scan, msg_s, msg_o if det.objects is not None else None, det.timings)
-    return len(surfaces), len(clusters), time.perf_counter() - t
+    surfaces, obstacles = detection_messages(det, params.safe, scan.stamp, frame, scan.seq)
+    results.write(scan, surfaces, obstacles, det.timings)
+    n_objects = 0 if obstacles is None else len(obstacles.clusters)
+    return len(surfaces.surfaces), n_objects, time.perf_counter() - t
 
 
 def _sequence_summary(path, topic, per_scan, selection, out_dir: Path, total: float) -> None:
