@@ -99,9 +99,9 @@ def run(args: argparse.Namespace) -> int:
         ("objects merged", f"{o['merged']} {o['merged_groups'] or ''}".rstrip()),
         ("objects split", f"{o['split']}"),
     ]
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k:<{width}}  {v}")
+    from supportnode.cli._console import print_table
+
+    print_table(("score", "value"), rows, left=2)
     if args.json is not None:
         scores["result_dir"] = str(args.result_dir)
         scores["gt_cloud"] = str(args.gt_cloud)

@@ -21,6 +21,7 @@ import threading
 from typing import Any
 
 from supportnode.cli._common import positive_number, positive_seconds
+from supportnode.cli._console import progress
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_SCAN_ENDPOINT = "tcp://127.0.0.1:5555"
@@ -165,9 +166,13 @@ def _convert(args: argparse.Namespace) -> int:
     with open_source(args.source, topic=args.scan_topic) as src:
         ctx = foxglove.Context()
         channels = Channels(ctx)
-        with write_mcap(ctx, args.out) as writer:
+        with (
+            write_mcap(ctx, args.out) as writer,
+            progress(f"view {args.source}", _count(src), "messages", args.quiet) as bar,
+        ):
             writer.write_metadata("supportnode", {"converted_from": os.fspath(args.source)})
             for m in src.messages():
+                bar.advance(1)
                 try:
                     msg = m.decode()
                 except ProtocolError as err:
@@ -183,6 +188,12 @@ def _convert(args: argparse.Namespace) -> int:
         f"to {args.out}" + (f" ({skipped} skipped)" if skipped else ""),
     )
     return 0
+
+
+def _count(src: Any) -> int | None:
+    """Messages of every topic of ``src``, when it knows them without reading."""
+    counts = [src.count(t) for t in src.topics()]
+    return None if None in counts else sum(c for c in counts if c is not None)
 
 
 def _ns(seconds: float) -> int:

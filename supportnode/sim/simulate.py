@@ -6,6 +6,8 @@ Each cloud draws its noise from its own seeded generator (`seed` for a sampled c
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from supportnode.sim.cloud import SimCloud
@@ -43,11 +45,16 @@ def scans(
     seed: int = 0,
     noise: NoiseSpec | None = None,
     frame: str = "world",
+    on_scan: Callable[[int], None] | None = None,
 ) -> list[SimCloud]:
-    """One scan per pose ((F, 4, 4) sensor-to-world), stamps i / sensor.rate seconds."""
+    """One scan per pose ((F, 4, 4) sensor-to-world), stamps i / sensor.rate seconds.
+
+    on_scan: called with each scan's index once it is done (progress)."""
     noise = noise or NoiseSpec()
     out = []
     for i, pose in enumerate(poses):
         cloud = sensor.scan(scene, pose, stamp=i / sensor.rate)
         out.append(finish(cloud, scene, noise, np.random.default_rng([seed, i]), frame))
+        if on_scan is not None:
+            on_scan(i)
     return out
