@@ -75,7 +75,7 @@ def test_folder_of_cloud_files(tmp_path: Path, rng) -> None:
     ("extra", "message"),
     [
         (["--topic", "lidar"], "no PointCloud topic 'lidar' (there are: scan)"),
-        (["--render"], "--render and --sensor-origin are for one cloud"),
+        (["--render"], "--render, --view, --save and --sensor-origin are for one cloud"),
         (["--every", "0"], None),
     ],
 )

@@ -4,27 +4,16 @@ from __future__ import annotations
 
 import re
 import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
+from conftest import run_cli
 from mcap.writer import Writer
 
 from supportnode.cli.echo import format_message
 from supportnode.msgs import PointCloud
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "supportnode", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=REPO,
-    )
 
 
 def _foreign_mcap(path: Path) -> None:
@@ -47,7 +36,7 @@ def _foreign_mcap(path: Path) -> None:
 def test_info_lists_channels_it_cannot_play(tmp_path: Path) -> None:
     path = tmp_path / "foxglove.mcap"
     _foreign_mcap(path)
-    res = _cli("info", str(path))
+    res = run_cli("info", str(path))
     assert res.returncode == 0, res.stderr
     assert "none playable" not in res.stdout
     assert "messages:  11 over 0.700 s" in res.stdout
@@ -59,7 +48,7 @@ def test_info_lists_channels_it_cannot_play(tmp_path: Path) -> None:
 
 
 def test_info_on_our_recording_counts_playable_topics() -> None:
-    res = _cli("info", "sim_scans/shelf_lidar.mcap")
+    res = run_cli("info", "sim_scans/shelf_lidar.mcap")
     assert res.returncode == 0
     assert re.search(r"^scan +PointCloud +5 +10\.00 Hz", res.stdout, re.M), res.stdout
     assert "playable:" not in res.stdout  # everything plays
@@ -76,7 +65,7 @@ def test_echo_says_what_it_waits_for_after_two_seconds() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    res = _cli("echo", "surfaces", "--endpoint", f"tcp://127.0.0.1:{port}", "--timeout", "3")
+    res = run_cli("echo", "surfaces", "--endpoint", f"tcp://127.0.0.1:{port}", "--timeout", "3")
     assert res.returncode == 0
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr

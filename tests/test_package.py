@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import run_cli
 
 from supportnode import __version__
 from supportnode.config import load_config
@@ -19,37 +20,27 @@ from supportnode.config import load_config
 REPO = Path(__file__).resolve().parents[1]
 
 
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "supportnode", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=cwd,
-    )
-
-
 def test_top_level_help_is_for_users_with_examples() -> None:
-    proc = cli("--help")
+    proc = run_cli("--help")
     assert proc.returncode == 0
     assert "support surfaces" in proc.stdout
     assert "examples:" in proc.stdout and "supportnode launch demo" in proc.stdout
     assert "dispatches" not in proc.stdout  # not the developer docstring
-    bare = cli()
+    bare = run_cli()
     assert bare.returncode == 2 and "examples:" in bare.stdout
-    assert cli("--version").stdout.strip() == f"supportnode {__version__}"
+    assert run_cli("--version").stdout.strip() == f"supportnode {__version__}"
 
 
 def test_config_dump_writes_the_full_default_config(tmp_path: Path) -> None:
-    proc = cli("config", "dump")
+    proc = run_cli("config", "dump")
     assert proc.returncode == 0
     assert proc.stdout == (REPO / "config" / "default.yaml").read_text()
     out = tmp_path / "my.yaml"
-    assert cli("config", "dump", "-o", str(out)).returncode == 0
+    assert run_cli("config", "dump", "-o", str(out)).returncode == 0
     assert load_config(out) == load_config(None)
-    noisy = cli("config", "dump", "noisy")
+    noisy = run_cli("config", "dump", "noisy")
     assert noisy.stdout == (REPO / "config" / "noisy.yaml").read_text()
-    bad = cli("config", "dump", "nosuch")
+    bad = run_cli("config", "dump", "nosuch")
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         "supportnode config: error: no shipped config file 'nosuch' (there are: default, noisy, "
@@ -58,12 +49,12 @@ def test_config_dump_writes_the_full_default_config(tmp_path: Path) -> None:
 
 
 def test_launch_takes_a_shipped_name_from_any_folder(tmp_path: Path) -> None:
-    proc = cli("launch", "demo", "--check", cwd=tmp_path)
+    proc = run_cli("launch", "demo", "--check", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "table_chairs_lidar.mcap" in proc.stdout and "planner.py" in proc.stdout
-    listed = cli("config", "list").stdout
+    listed = run_cli("config", "list").stdout
     assert "launch  demo" in listed and "config  default" in listed
-    bad = cli("launch", "demo2", cwd=tmp_path)
+    bad = run_cli("launch", "demo2", cwd=tmp_path)
     assert bad.returncode == 2
     assert "no shipped launch file 'demo2' (there are: demo, example_pubsub)" in bad.stderr
 

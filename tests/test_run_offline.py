@@ -13,22 +13,13 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import run_cli
 
 from supportnode.io.recording import McapFile
 from supportnode.msgs import decode_any
 
 REPO = Path(__file__).resolve().parents[1]
 RECORDING = REPO / "sim_scans" / "table_chairs_lidar.mcap"  # 5 posed OS-128 scans at 10 Hz
-
-
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "supportnode", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=REPO,
-    )
 
 
 def _results(path: Path) -> dict[tuple[str, float], list[tuple]]:
@@ -50,10 +41,10 @@ def _results(path: Path) -> dict[tuple[str, float], list[tuple]]:
 
 def test_offline_run_is_deterministic_and_complete(tmp_path: Path) -> None:
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
-    first = _cli("run", "--input", str(RECORDING), "--output", str(a))
+    first = run_cli("run", "--input", str(RECORDING), "--output", str(a))
     assert first.returncode == 0, first.stderr
     assert "wrote" in first.stdout
-    assert _cli("run", "--input", str(RECORDING), "--output", str(b), "--quiet").returncode == 0
+    assert run_cli("run", "--input", str(RECORDING), "--output", str(b), "--quiet").returncode == 0
     ra, rb = _results(a), _results(b)
     assert ra == rb
     assert sorted(k[1] for k in ra if k[0] == "surfaces") == pytest.approx([0, 0.1, 0.2, 0.3, 0.4])
@@ -63,7 +54,7 @@ def test_offline_run_is_deterministic_and_complete(tmp_path: Path) -> None:
 
 
 def test_offline_run_bad_input_is_one_line(tmp_path: Path) -> None:
-    res = _cli("run", "--input", str(tmp_path / "nope.mcap"))
+    res = run_cli("run", "--input", str(tmp_path / "nope.mcap"))
     assert res.returncode == 2
     assert res.stderr.strip().splitlines() == [
         f"supportnode run: error: {tmp_path / 'nope.mcap'}: no such file or folder"
@@ -79,7 +70,7 @@ def _port() -> int:
 @pytest.mark.slow
 def test_offline_results_equal_a_live_replay_the_node_keeps_up_with(tmp_path: Path) -> None:
     offline = tmp_path / "offline.mcap"
-    assert _cli("run", "--input", str(RECORDING), "--output", str(offline)).returncode == 0
+    assert run_cli("run", "--input", str(RECORDING), "--output", str(offline)).returncode == 0
     scan_port, pub_port = _port(), _port()
     scan_ep, pub_ep = f"tcp://127.0.0.1:{scan_port}", f"tcp://127.0.0.1:{pub_port}"
     env = {**os.environ, "PYTHONPATH": str(REPO)}

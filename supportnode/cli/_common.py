@@ -83,3 +83,16 @@ def add_tf_arguments(parser: argparse.ArgumentParser) -> None:
 def tf_options(args: argparse.Namespace) -> dict[str, object]:
     """The `open_source` keywords of `add_tf_arguments`."""
     return {"fixed_frame": args.fixed_frame, "tf_tolerance": args.tf_tolerance}
+
+
+def add_rerun_arguments(parser: argparse.ArgumentParser, flag: str, what: str) -> None:
+    """``flag`` [spawn|web] (show ``what`` in Rerun) and ``--save FILE.rrd``."""
+    parser.add_argument(
+        flag,
+        nargs="?",
+        const="spawn",
+        choices=("spawn", "web"),
+        help=f"show {what} in Rerun (needs the rerun extra): its viewer app (default), or "
+        "'web': serve Rerun's web viewer from this machine and print its URL",
+    )
+    parser.add_argument("--save", metavar="FILE.rrd", help="write the Rerun scene to a file")

@@ -10,14 +10,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from supportnode.cli._common import (
-    add_config_arguments,
-    add_tf_arguments,
-    int_at_least,
-    positive_seconds,
-    tf_options,
-)
+from supportnode.cli._common import add_config_arguments, add_rerun_arguments, positive_seconds
 from supportnode.cli._console import Interrupted, print_table, progress
+from supportnode.cli._sequence import add_sequence_arguments, process_sequence
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,28 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--render", action="store_true", help="also draw result.png (needs the viz extra)"
     )
-    parser.add_argument(
-        "--view",
-        nargs="?",
-        const="spawn",
-        choices=("spawn", "web"),
-        help="show the result in Rerun (needs the rerun extra): its viewer app (default), or "
-        "'web': serve the web viewer from this machine and print its URL",
-    )
-    parser.add_argument("--save", metavar="FILE.rrd", help="write the Rerun scene to a file")
+    add_rerun_arguments(parser, "--view", "the result")
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    seq = parser.add_argument_group("sequences (recordings and folders)")
-    seq.add_argument("--topic", help="PointCloud topic to read (default: the only one, or scan)")
-    seq.add_argument(
-        "--every", type=int_at_least(1), default=1, metavar="N", help="every N-th scan only"
-    )
-    seq.add_argument(
-        "--start", type=float, default=0.0, metavar="S", help="skip the first S seconds"
-    )
-    seq.add_argument(
+    add_sequence_arguments(parser, "sequences (recordings, bags and folders)")
+    parser.add_argument(
         "--duration", type=positive_seconds, metavar="S", help="read S seconds from --start"
     )
-    add_tf_arguments(parser)
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -209,40 +188,22 @@ def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -
 
 
 def _run_sequence(args: argparse.Namespace, params: Any, out_dir: Path) -> int:
-    import sys
-
-    from supportnode.io.scans import ScanSelection
-    from supportnode.io.sequence import SequenceResults
-    from supportnode.io.sources import open_source
-
-    if args.render or args.sensor_origin is not None:
+    if args.render or args.sensor_origin is not None or args.view or args.save:
         from supportnode.errors import SupportNodeError
 
         raise SupportNodeError(
-            "--render and --sensor-origin are for one cloud; a sequence's scans carry their poses"
+            "--render, --view, --save and --sensor-origin are for one cloud; a sequence's "
+            "scans carry their poses (see them with: supportnode view OUT/results.mcap --rerun)"
         )
-    selection = ScanSelection(args.topic, args.every, args.start, args.duration)
     t0 = time.perf_counter()
     per_scan: list[tuple[int, int, float]] = []  # surfaces, objects, seconds
-    with open_source(args.cloud, **tf_options(args)) as source:
-        topic = selection.pick_topic(source)
-        total = selection.expected(source, topic)
-        with (
-            SequenceResults(out_dir / "results.mcap", out_dir / "results.jsonl") as results,
-            progress(f"detect {args.cloud}", total, "scans", args.quiet) as bar,
-        ):
-            try:
-                for scan in selection.scans(source, topic):
-                    per_scan.append(_detect_scan(scan, params, args, results))
-                    bar.advance(1)
-            except KeyboardInterrupt as err:
-                raise Interrupted(
-                    f"after {results.scans} scans; their results are in "
-                    f"{results.mcap_path} and {results.jsonl_path}"
-                ) from err
-        warnings = list(source.warnings)
-    for w in warnings:
-        print(f"supportnode detect: warning: {w}", file=sys.stderr)
+
+    def handle(scan: Any, results: Any) -> None:
+        per_scan.append(_detect_scan(scan, params, args, results))
+
+    topic, _, selection = process_sequence(
+        "detect", args.cloud, args, out_dir / "results.mcap", handle
+    )
     if not args.quiet:
         _sequence_summary(args.cloud, topic, per_scan, selection, out_dir, time.perf_counter() - t0)
     return 0

@@ -12,15 +12,11 @@ import argparse
 import logging
 import sys
 from pathlib import Path
+from typing import Any
 
-from supportnode.cli._common import (
-    add_config_arguments,
-    add_tf_arguments,
-    int_at_least,
-    positive_seconds,
-    tf_options,
-)
-from supportnode.cli._console import Interrupted, print_table, progress
+from supportnode.cli._common import add_config_arguments, positive_seconds
+from supportnode.cli._console import print_table
+from supportnode.cli._sequence import add_sequence_arguments, process_sequence
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,15 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="results.mcap",
         help="offline results (default results.mcap; a .jsonl of one line per scan beside it)",
     )
-    offline.add_argument("--topic", help="PointCloud topic of --input (default: the only one)")
-    offline.add_argument(
-        "--every", type=int_at_least(1), default=1, metavar="N", help="every N-th scan only"
-    )
-    offline.add_argument(
-        "--start", type=float, default=0.0, metavar="S", help="skip the first S seconds"
-    )
     offline.add_argument("--quiet", action="store_true", help="no progress or summary")
-    add_tf_arguments(parser)
+    add_sequence_arguments(parser, "offline: which scans of --input")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,44 +86,28 @@ def _run_offline(args: argparse.Namespace, params) -> int:
     import time
 
     from supportnode.errors import InputError
-    from supportnode.io.scans import ScanSelection
-    from supportnode.io.sequence import SequenceResults
-    from supportnode.io.sources import open_source
     from supportnode.node.node import Node
 
-    selection = ScanSelection(args.topic, args.every, args.start, args.duration)
-    output = Path(args.output)
     t0 = time.perf_counter()
-    detections = 0
-    with open_source(args.input, **tf_options(args)) as source, Node(params) as node:
-        topic = selection.pick_topic(source)
-        with (
-            SequenceResults(output, output.with_suffix(".jsonl")) as results,
-            progress(
-                f"run {args.input}", selection.expected(source, topic), "scans", args.quiet
-            ) as bar,
-        ):
+    counts = {"detections": 0, "empty": 0}
+    with Node(params) as node:
+
+        def handle(scan: Any, results: Any) -> None:
             try:
-                for scan in selection.scans(source, topic):
-                    try:
-                        out = node.process(scan)
-                    except InputError:  # a scan without points: counted, the map unchanged
-                        selection.skipped["empty"] = selection.skipped.get("empty", 0) + 1
-                        continue
-                    results.write(scan, out.surfaces, out.obstacles, out.timings)
-                    detections += out.surfaces is not None
-                    bar.advance(1)
-            except KeyboardInterrupt as err:
-                raise Interrupted(
-                    f"after {results.scans} scans; their results are in "
-                    f"{results.mcap_path} and {results.jsonl_path}"
-                ) from err
-        warnings = list(source.warnings)
-    for w in warnings:
-        print(f"supportnode run: warning: {w}", file=sys.stderr)
+                out = node.process(scan)
+            except InputError:  # a scan without points: counted, the map unchanged
+                counts["empty"] += 1
+                return
+            results.write(scan, out.surfaces, out.obstacles, out.timings)
+            counts["detections"] += out.surfaces is not None
+
+        topic, results, selection = process_sequence(
+            "run", args.input, args, Path(args.output), handle
+        )
     if not args.quiet:
-        rows = [("scans", results.scans), ("detections", detections)]
-        rows += [(f"skipped: {why}", n) for why, n in selection.skipped.items()]
+        rows = [("scans", results.scans), ("detections", counts["detections"])]
+        skipped = {**selection.skipped, "empty": counts["empty"]}
+        rows += [(f"skipped: {why}", n) for why, n in skipped.items() if n]
         rows.append(("seconds", f"{time.perf_counter() - t0:.2f}"))
         print_table((f"{args.input} (topic {topic})", ""), rows)
         print(f"wrote {results.mcap_path} and {results.jsonl_path}")

@@ -20,7 +20,7 @@ import sys
 import threading
 from typing import Any
 
-from supportnode.cli._common import positive_number, positive_seconds
+from supportnode.cli._common import add_rerun_arguments, positive_number, positive_seconds
 from supportnode.cli._console import progress
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
@@ -86,21 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=positive_seconds, metavar="S", help="stop after S seconds"
     )
     parser.add_argument("--quiet", action="store_true", help="print only errors")
-    _add_rerun_arguments(parser)
-
-
-def _add_rerun_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--rerun",
-        nargs="?",
-        const="spawn",
-        choices=("spawn", "web"),
-        help="show in Rerun instead of Foxglove (needs the rerun extra): its viewer app "
-        "(default), or 'web': serve Rerun's web viewer from this machine",
-    )
-    parser.add_argument(
-        "--save", metavar="FILE.rrd", help="write the Rerun scene to a file (live or SOURCE)"
-    )
+    add_rerun_arguments(parser, "--rerun", "the node (or SOURCE) instead of Foxglove")
 
 
 def _port(text: str) -> int:
