@@ -85,6 +85,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("files", nargs="*", type=Path)
     ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args(argv)
+    if args.repeats < 1:
+        ap.error(f"--repeats must be at least 1, got {args.repeats}")
+    for p in args.files:
+        if not p.is_file():
+            ap.error(f"{p}: no such file")
     with tempfile.TemporaryDirectory() as tmp:
         files = args.files or [REAL / f for f in REAL_FILES if (REAL / f).exists()]
         files = files or [_synthetic(Path(tmp))]
