@@ -30,12 +30,18 @@ examples:
 # name -> (module, one-line help). Each module defines `add_arguments(parser)` and `run(args) -> int`;
 # modules are imported only when their command runs, so optional extras stay optional.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "detect": ("supportnode.cli.detect", "find support surfaces and objects in one cloud file"),
+    "detect": (
+        "supportnode.cli.detect",
+        "find support surfaces and objects in a cloud, or in every scan of a recording",
+    ),
     "sim": ("supportnode.cli.sim", "simulate scenes with ground truth (sampled, lidar, camera)"),
     "eval": ("supportnode.cli.evaluate", "score a detect output against simulator ground truth"),
     "render": ("supportnode.cli.render", "draw a detection result as a PNG"),
     "launch": ("supportnode.cli.launch", "start a launch file's processes, stop them in order"),
-    "run": ("supportnode.cli.run", "run the node: scans in, surfaces and obstacles out"),
+    "run": (
+        "supportnode.cli.run",
+        "run the node: scans in, surfaces and obstacles out (--input REC: offline)",
+    ),
     "record": ("supportnode.cli.record", "record published messages into an MCAP file"),
     "play": (
         "supportnode.cli.play",
@@ -45,7 +51,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "echo": ("supportnode.cli.echo", "print a topic's messages, decoded (text or JSON lines)"),
     "hz": ("supportnode.cli.hz", "rate, period jitter and bandwidth of a topic, once a second"),
     "keys": ("supportnode.cli.keys", "make a CURVE key pair for encrypted, authenticated sockets"),
-    "view": ("supportnode.cli.view", "show the node's topics or a recording live in Foxglove"),
+    "view": (
+        "supportnode.cli.view",
+        "show the node's topics or a recording live in Foxglove or Rerun",
+    ),
     "config": ("supportnode.cli.config", "print the default configuration, list shipped files"),
 }
 

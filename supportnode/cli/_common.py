@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 
 def add_config_arguments(parser: argparse.ArgumentParser, example: str) -> None:
@@ -80,7 +81,7 @@ def add_tf_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def tf_options(args: argparse.Namespace) -> dict[str, object]:
+def tf_options(args: argparse.Namespace) -> dict[str, Any]:
     """The `open_source` keywords of `add_tf_arguments`."""
     return {"fixed_frame": args.fixed_frame, "tf_tolerance": args.tf_tolerance}
 

@@ -292,7 +292,7 @@ class RosBag:
         tf, imu = TfBuffer(), []
         for m in self.messages(tf_topics | imu_topics):
             try:
-                msg = self._reader.deserialize(m.rawdata, m.msgtype)
+                msg: Any = self._reader.deserialize(m.rawdata, m.msgtype)
             except Exception as err:
                 self.warnings.append(
                     f"{self.path}: topic {m.topic!r}: skipped a message ({_one_line(err)})"

@@ -63,6 +63,8 @@ class RerunScene(Closing):
         self.url: str | None = None
         self._heights: dict[int, float] = {}  # surface id -> height, of the last detection
         if mode == "save":
+            if path is None:
+                raise ViewError("saving a Rerun scene needs a file name")
             self.rec.save(os.fspath(path))
         elif mode == "spawn":
             self.rec.spawn()
