@@ -115,3 +115,19 @@ def test_built_wheel_installs_and_runs_the_demo_outside_the_repo(tmp_path: Path)
         ln for ln in demo.stdout.splitlines() if ln.startswith("[planner]") and "safe of" in ln
     ]
     assert lines, demo.stdout[-2000:] + demo.stderr[-2000:]
+
+
+def test_output_into_a_closed_pipe_is_no_traceback(monkeypatch, capsys) -> None:
+    # `supportnode info REC | head -1`: the reader is gone before the summary is printed
+    from supportnode.cli import main
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    closed = os.fdopen(write_end, "w", buffering=1)
+    monkeypatch.setattr(sys, "stdout", closed)
+    try:
+        assert main(["info", str(REPO / "sim_scans" / "shelf_lidar.mcap")]) == 0
+    finally:
+        monkeypatch.undo()
+        closed.close()
+    assert "Traceback" not in capsys.readouterr().err

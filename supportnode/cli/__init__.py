@@ -91,6 +91,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SupportNodeError as err:
         print(f"supportnode {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `supportnode detect ... | head`: the reader has all it wants
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except KeyboardInterrupt as err:
         detail = getattr(err, "detail", "")  # cli._console.Interrupted: what was left behind
         print(
