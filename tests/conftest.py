@@ -6,6 +6,8 @@ import contextlib
 import dataclasses
 import shutil
 import socket
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -14,6 +16,17 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 REAL_SCANS = REPO.parent / "shared" / "real_scans"
+
+
+def run_cli(*args: str, cwd: Path = REPO, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """``python -m supportnode ARGS`` as a user runs it: a subprocess, output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "supportnode", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd,
+    )
 
 
 def plane_points(rng, x0, x1, y0, y1, z, n):
