@@ -131,7 +131,10 @@ def test_run_end_to_end(sim_scans):
             msg = sub.recv(0.5)
             if isinstance(msg, Diagnostics):
                 diags.append(msg)
-                if msg.counters.get("time_jumps", 0) >= 1:
+                c = msg.counters
+                # the restart seen, and the detection of its scan finished (its surfaces went
+                # out first): a new timeline is admitted a second after the old one stopped
+                if c.get("time_jumps", 0) >= 1 and c["detections"] >= c["scans_processed"]:
                     break
         d = diags[-1]
         # garbage that arrives while a scan is processed may be dropped as older than the
