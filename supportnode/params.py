@@ -214,7 +214,7 @@ class GravityParams:
         "a refusal); zeros: decide from the scene",
     )
     hint_cone_deg: float = param(
-        45.0,
+        60.0,
         "up_hint: plane families within this angle of it compete (the nearest wins); none: "
         "up is refined on the planar normals within it, or is the hint itself",
         "deg",

@@ -184,6 +184,10 @@ def test_align_refuses_a_cloud_without_horizontal_surfaces(tmp_path, rng, capsys
     )
     err = capsys.readouterr().err
     assert "horizontal surface" in err and len(err.strip().splitlines()) == 1
+    advised = _advice(err, r"--set gravity\.up_hint=\[[-0-9.,]+\]")  # followed: no refusal
+    args = ["detect", str(tmp_path / "ball.npy"), "--align", "--out", str(tmp_path / "o")]
+    assert main([*args, "--quiet", *advised]) == 0
+    assert "no plane family within 60 deg of up_hint" in capsys.readouterr().err
 
 
 def test_sensor_origin_drops_undersides_and_rejects_bad_values(table_cloud, tmp_path, capsys):

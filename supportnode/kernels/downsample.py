@@ -49,6 +49,9 @@ def _sums(points: np.ndarray, inv: float) -> np.ndarray:
     slot = np.full(2 * cap, -1, np.int64)  # open addressing, load <= 1/2
     mask = 2 * cap - 1
     used = 0
+    # The voxel of the previous point: a depth image's neighbouring pixels mostly share one,
+    # and then no hash lookup is needed.
+    last, li, lj, lk = -1, 0, 0, 0
     for r in range(points.shape[0]):
         x, y, z = points[r, 0], points[r, 1], points[r, 2]
         fx, fy, fz = x * inv, y * inv, z * inv
@@ -56,26 +59,30 @@ def _sums(points: np.ndarray, inv: float) -> np.ndarray:
         if not (abs(fx) < _MAX_INDEX and abs(fy) < _MAX_INDEX and abs(fz) < _MAX_INDEX):
             continue
         i, j, k = int(np.floor(fx)), int(np.floor(fy)), int(np.floor(fz))
-        h = _hash(i, j, k, mask)
-        while True:
-            v = slot[h]
-            if v < 0:
-                if used == cap:
-                    keys, sums, cap = _grow(keys), _grow(sums), 2 * cap
-                    slot = _rehash(keys, used, 2 * cap)
-                    mask = 2 * cap - 1
-                    h = _hash(i, j, k, mask)
-                    while slot[h] >= 0:
-                        h = (h + 1) & mask
-                v = used
-                slot[h] = v
-                keys[v, 0], keys[v, 1], keys[v, 2] = i, j, k
-                sums[v, 0], sums[v, 1], sums[v, 2] = x, y, z
-                used += 1
-                break
-            if keys[v, 0] == i and keys[v, 1] == j and keys[v, 2] == k:
-                break
-            h = (h + 1) & mask
+        if last >= 0 and i == li and j == lj and k == lk:
+            v = last
+        else:
+            h = _hash(i, j, k, mask)
+            while True:
+                v = slot[h]
+                if v < 0:
+                    if used == cap:
+                        keys, sums, cap = _grow(keys), _grow(sums), 2 * cap
+                        slot = _rehash(keys, used, 2 * cap)
+                        mask = 2 * cap - 1
+                        h = _hash(i, j, k, mask)
+                        while slot[h] >= 0:
+                            h = (h + 1) & mask
+                    v = used
+                    slot[h] = v
+                    keys[v, 0], keys[v, 1], keys[v, 2] = i, j, k
+                    sums[v, 0], sums[v, 1], sums[v, 2] = x, y, z
+                    used += 1
+                    break
+                if keys[v, 0] == i and keys[v, 1] == j and keys[v, 2] == k:
+                    break
+                h = (h + 1) & mask
+            last, li, lj, lk = v, i, j, k
         dx, dy, dz = x - sums[v, 0], y - sums[v, 1], z - sums[v, 2]
         sums[v, 3] += dx
         sums[v, 4] += dy

@@ -131,17 +131,13 @@ def estimate_gravity(
     min_support = max(_MIN_FAMILY_POINTS, int(np.ceil(_MIN_FAMILY_FRACTION * ds.shape[0])))
     fams, best = find_families(normals, planar, params.inlier_angle_deg, min_support)
     if hint is not None:
-        cone = np.cos(np.radians(params.hint_cone_deg))
-        near = [f for f in fams if abs(f.axis @ hint) >= cone]
-        if not near:
+        picked = _nearest(fams, hint, params.hint_cone_deg)
+        if picked is None:
             what = (
                 f"no plane family within {params.hint_cone_deg:g} deg of up_hint {fmt_vector(hint)}"
             )
             return _from_hint(hint, normals[planar], params, what)
-        fam = max(near, key=lambda f: abs(f.axis @ hint))
-        up = fam.axis * np.sign(fam.axis @ hint)
-        off = np.degrees(np.arccos(min(1.0, abs(float(fam.axis @ hint)))))
-        reason = f"up_hint: the plane family nearest it, {off:.0f} deg away"
+        fam, up, reason = picked
     elif not fams:
         raise AlignmentError(
             f"no horizontal surface in view: the largest family of parallel planes has "
@@ -156,7 +152,27 @@ def estimate_gravity(
     return replace(est, sensor_height=height)
 
 
-_ADVICE = "if you know the up direction in the cloud's frame, pass --set gravity.up_hint=[x,y,z]"
+_ADVICE = (
+    "if you know the up direction in the cloud's frame, pass it, e.g. "
+    "--set gravity.up_hint=[0,-1,0] for a level camera's optical frame (y down)"
+)
+
+
+def _nearest(
+    fams: list[Family], hint: np.ndarray, cone_deg: float
+) -> tuple[Family, np.ndarray, str] | None:
+    """The family nearest the unit ``hint`` within ``cone_deg``, its axis signed like the
+    hint, and why; None when no family is that near."""
+    near = [f for f in fams if abs(f.axis @ hint) >= np.cos(np.radians(cone_deg))]
+    if not near:
+        return None
+    fam = max(near, key=lambda f: abs(f.axis @ hint))
+    off = np.degrees(np.arccos(min(1.0, abs(float(fam.axis @ hint)))))
+    return (
+        fam,
+        fam.axis * np.sign(fam.axis @ hint),
+        f"up_hint: the plane family nearest it, {off:.0f} deg away",
+    )
 
 
 def _level(
