@@ -1,16 +1,18 @@
 """Gravity alignment on the real scans beside the repository: refusals, level, time.
 
-    python bench/real_gravity.py [--real ../shared/real_scans] [--repeat 3] [--timing]
+    python bench/real_gravity.py [--real ../shared/real_scans] [--repeat 3] [--timing mosd|sim]
 
 Every scan as `supportnode detect SCAN --align` takes it: no hint, the camera at the origin,
 the SICK scan in millimetres read with its guessed unit. Per scan: refused or not; `up err`,
 the angle between the estimated up and the normal of the plane fitted to the points labelled
 table (mOSD scans only, their ground truth); the tilt from +z of the detected floor or table
 surfaces' normals (what result.json reports; `tests/real_levels.py` says which surface is the
-floor or table); gravity ms, the median of --repeat runs. --timing: only the mOSD scans'
-gravity time and refusals, with nothing but the public API, so that it runs on any revision:
+floor or table); gravity ms, the median of --repeat runs. --timing mosd: only the mOSD
+scans' gravity time and refusals; --timing sim: the simulator's scenes, 200,000 points tilted
+by 20/15 deg, for a peer of the real scans in time. Both use nothing but the public API, so
+that they run on any revision:
 
-    cp bench/real_gravity.py /tmp/rg.py && python bench/ab.py --a main -- /tmp/rg.py --timing
+    cp bench/real_gravity.py /tmp/rg.py && python bench/ab.py --a main -- /tmp/rg.py --timing mosd
 
 The last line is a JSON summary (for bench/ab.py).
 """
@@ -69,6 +71,20 @@ def timing(root: Path, repeat: int) -> dict:
     return {"mosd_scans": len(learn), "refused": refused, "gravity_ms_p50": statistics.median(ms)}
 
 
+def timing_sim(repeat: int) -> dict:
+    from supportnode.sim.noise import apply_tilt
+    from supportnode.sim.scene import bundled_scenes, load_scene
+    from supportnode.sim.sensors import sample_scene
+
+    out = {}
+    for name in bundled_scenes():
+        cloud = apply_tilt(sample_scene(load_scene(name), 200_000, seed=2), 20.0, 15.0)
+        points = cloud.points.astype(np.float64)
+        estimate_gravity(points)  # compiled kernels loaded, not timed
+        out[f"sim_{name}_ms"] = timed(points, repeat)[1] * 1000
+    return {**out, "gravity_ms_p50": statistics.median(out.values())}
+
+
 def full(root: Path, repeat: int) -> dict:
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
     from common import table
@@ -112,12 +128,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--real", type=Path, default=REAL, help="the real_scans folder")
     ap.add_argument("--repeat", type=int, default=3, help="timed runs per scan")
-    ap.add_argument("--timing", action="store_true", help="mOSD gravity time only (any rev)")
+    ap.add_argument("--timing", choices=("mosd", "sim"), help="gravity time only (any rev)")
     args = ap.parse_args()
-    if not (args.real / "mosd_learn").is_dir():
+    if args.timing == "sim":
+        summary = timing_sim(args.repeat)
+    elif not (args.real / "mosd_learn").is_dir():
         print(f"real_gravity.py: error: {args.real}/mosd_learn not found", file=sys.stderr)
         return 2
-    summary = timing(args.real, args.repeat) if args.timing else full(args.real, args.repeat)
+    else:
+        summary = (timing if args.timing else full)(args.real, args.repeat)
     print(json.dumps({**summary, "load": os.getloadavg()[0]}))
     return 0
 
