@@ -121,3 +121,84 @@ def test_cli_eval_count_mismatch(tmp_path, result_dir, capsys) -> None:
     assert _main(["eval", str(result_dir), str(gt)]) == 2
     err = capsys.readouterr().err
     assert "labels.npz has 12 labels" in err and "gt.npz has 5 points" in err
+
+
+# Support: GT object 0 on a surface, 1 standing on 0, 2 on a surface (points 0-2: table).
+SUP_OBJECT = np.array([-1, -1, -1, 0, 0, 0, 1, 1, 1, 2, 2, 2])
+SUP_BY = np.array([-1, -1, -1, -1, -1, -1, 0, 0, 0, -1, -1, -1])
+SUP_SURFACE = np.array([0, 0, 0] + [-1] * 9)
+# Clusters renamed: object 1 -> cluster 0, object 2 -> 1, object 0 -> 2.
+SUP_PRED = np.array([-1, -1, -1, 2, 2, 2, 0, 0, 0, 1, 1, 1])
+
+
+def test_supported_by_scores() -> None:
+    def support(pred, by):
+        return evaluate(SUP_SURFACE, pred, SUP_SURFACE, SUP_OBJECT, SUP_BY, np.array(by))[
+            "objects"
+        ]["support"]
+
+    right = support(SUP_PRED, [2, -1, -1])
+    assert right == {
+        "correct": 3,
+        "total": 3,
+        "accuracy": 1.0,
+        "stacked_correct": 1,
+        "stacked_total": 1,
+    }
+    flat = support(SUP_PRED, [-1, -1, -1])  # a stack taken as standing on the table
+    assert (flat["correct"], flat["stacked_correct"]) == (2, 0)
+    wrong = support(SUP_PRED, [1, -1, 0])  # on the wrong object; a surface object on another
+    assert (wrong["correct"], wrong["stacked_correct"]) == (1, 0)
+    # The supporter lost (its points claimed by no cluster): the top box cannot be right.
+    lost = support(np.where(SUP_OBJECT == 0, -1, SUP_PRED), [-1, -1, -1])
+    assert (lost["correct"], lost["stacked_correct"]) == (1, 0)
+    assert evaluate(SUP_SURFACE, SUP_PRED, SUP_SURFACE, SUP_OBJECT)["objects"]["support"] is None
+    for bad in ([2, -1], [3, -1, -1], [-2, -1, -1]):
+        with pytest.raises(InputError, match="pred_supported_by"):
+            support(SUP_PRED, bad)
+
+
+def test_cli_eval_reports_supported_by(tmp_path, capsys) -> None:
+    d = tmp_path / "out"
+    d.mkdir()
+    np.savez(d / "labels.npz", surface=SUP_SURFACE, object=SUP_PRED)
+    gt = tmp_path / "gt.npz"
+    np.savez(gt, object=SUP_OBJECT, surface=SUP_SURFACE, supported_by=SUP_BY)
+    objects = [{"id": i, "surface_id": 0, "supported_by": b} for i, b in enumerate([2, -1, -1])]
+    (d / "result.json").write_text(json.dumps({"objects": objects}))
+    out = tmp_path / "s.json"
+    assert _main(["eval", str(d), str(gt), "--json", str(out)]) == 0
+    assert "supported_by right  3/3 (stacked 1/1)" in capsys.readouterr().out
+    assert json.loads(out.read_text())["objects"]["support"]["accuracy"] == 1.0
+    # Results from before the field: the line says "-".
+    for o in objects:
+        del o["supported_by"]
+    (d / "result.json").write_text(json.dumps({"objects": objects}))
+    assert _main(["eval", str(d), str(gt)]) == 0
+    assert "supported_by right  -" in capsys.readouterr().out
+    objects[0]["supported_by"] = "table"
+    for o in objects[1:]:
+        o["supported_by"] = -1
+    (d / "result.json").write_text(json.dumps({"objects": objects}))
+    assert _main(["eval", str(d), str(gt)]) == 2
+    err = capsys.readouterr().err
+    assert "result.json: objects[0]" in err and err.count("\n") == 1
+
+
+def test_cli_eval_organised_ply_truth_with_nan_rows(tmp_path, result_dir) -> None:
+    """An organised cloud's NaN pixels are dropped on reading, as detect drops them; the
+    labels (one per file row) still line up with the truth row by row."""
+    clouds = pytest.importorskip("supportnode.io.clouds")
+    points = np.random.default_rng(0).random((14, 3))
+    points[[3, 10]] = np.nan  # two pixels without a return
+    rows = np.delete(np.arange(14), [3, 10])
+    obj, surf = np.full(14, -1, np.int32), np.full(14, -1, np.int32)
+    obj[rows], surf[rows] = GT_OBJECT, GT_SURFACE
+    gt = tmp_path / "organised.ply"
+    clouds.write_ply(gt, points, fields={"object": obj, "surface": surf})
+    np.savez(result_dir / "labels.npz", surface=surf, object=obj)
+    out = tmp_path / "s.json"
+    assert _main(["eval", str(result_dir), str(gt), "--json", str(out)]) == 0
+    scores = json.loads(out.read_text())
+    assert scores["points"] == 14 and scores["objects"]["ari"] == 1.0
+    assert scores["surfaces"]["f1"] == 1.0

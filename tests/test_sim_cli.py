@@ -84,6 +84,9 @@ def test_scene_from_a_path(tmp_path):
         (["shelf", "--noise", "range:0.01"], "range noise follows sensor rays"),
         (["shelf", "--sensor", "lidar", "--preset", "d435"], "camera preset"),
         (["shelf", "--points", "0"], "--points must be at least 1"),
+        (["shelf", "--noise", "kinect"], "kinect noise, --organized and --frame optical need"),
+        (["shelf", "--sensor", "lidar", "--organized"], "need --sensor camera"),
+        (["shelf", "--noise", "kinect:x"], "'x' is not a number"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys, args, message):
@@ -94,6 +97,17 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "x.ply").exists()
+
+
+def test_organised_kinect_scan_in_the_optical_frame(tmp_path):
+    out = tmp_path / "k.npz"
+    argv = ["sim", "u_table", "--sensor", "camera", "--preset", "kinect", "--noise", "kinect"]
+    assert cli.main([*argv, "--organized", "--frame", "optical", "--out", str(out)]) == 0
+    cloud = read_sim_npz(out)
+    assert cloud.image_shape == (480, 640) and len(cloud) == 480 * 640
+    seen = np.isfinite(cloud.points[:, 0])
+    assert 0.1 < seen.mean() < 1.0 and (cloud.points[seen, 2] > 0.4).all()  # z forward
+    assert (cloud.role[~seen] == -1).all()
 
 
 def test_sim_writes_a_recording_that_play_reads(tmp_path):

@@ -161,16 +161,19 @@ def test_label_table_top_faces_only():
     assert table["surface_top"][floor] == 0
 
 
-@pytest.mark.parametrize("name", ["shelf", "table_chairs", "u_table", "kitchen", "sloped"])
+@pytest.mark.parametrize(
+    "name", ["shelf", "table_chairs", "u_table", "kitchen", "sloped", "cluttered_table"]
+)
 def test_bundled_scene_contents(name):
     assert name in bundled_scenes()
     s = load_scene(name)
     expected = {  # (surfaces, objects)
-        "shelf": (5, 13),
+        "shelf": (5, 14),  # the toy car and its cabin (a box on its body) are two objects
         "table_chairs": (4, 1),
         "u_table": (2, 7),
         "kitchen": (4, 15),
         "sloped": (3, 2),
+        "cluttered_table": (2, 18),
     }[name]
     assert (len(s.surface_names), len(s.object_names)) == expected
     assert s.surface_names[0] == "floor"

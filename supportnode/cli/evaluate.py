@@ -33,9 +33,29 @@ def _load_labels(result_dir: Path) -> dict[str, Any]:
             missing = [k for k in ("surface", "object") if k not in z.files]
             if missing:
                 raise SupportNodeError(f"{path}: missing arrays {', '.join(missing)}")
-            return {"surface": z["surface"], "object": z["object"], "path": path}
+            labels = {"surface": z["surface"], "object": z["object"], "path": path}
     except (OSError, ValueError) as err:
         raise SupportNodeError(f"{path}: cannot read: {err}") from err
+    labels["supported_by"] = _load_supported_by(result_dir / "result.json")
+    return labels
+
+
+def _load_supported_by(path: Path) -> Any:
+    """(C,) supported_by per object from result.json, or None without the file or the field."""
+    import json
+
+    from supportnode.errors import InputError, SupportNodeError
+    from supportnode.sim.evaluate import supported_by_of
+
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text())
+        return supported_by_of(doc.get("objects", []) if isinstance(doc, dict) else [])
+    except (OSError, ValueError) as err:
+        raise SupportNodeError(f"{path}: cannot read: {err}") from err
+    except InputError as err:
+        raise SupportNodeError(f"{path}: {err}") from err
 
 
 def _load_truth(path: Path) -> dict[str, Any]:
@@ -54,7 +74,14 @@ def _load_truth(path: Path) -> dict[str, Any]:
     else:
         from supportnode.io.clouds import read_cloud
 
-        fields = dict(read_cloud(path).fields)
+        cloud = read_cloud(path)
+        # Rows without a finite point (an organised cloud's NaN pixels) are dropped on reading,
+        # as detect drops them; their truth is "none", so the labels line up row by row.
+        fields = {}
+        for key, value in cloud.fields.items():
+            full = np.full((cloud.input_count, *value.shape[1:]), -1, value.dtype)
+            full[cloud.source_index] = value
+            fields[key] = full
     missing = [k for k in ("object", "surface") if k not in fields]
     if missing:
         raise SupportNodeError(
@@ -70,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from supportnode.errors import SupportNodeError
-    from supportnode.sim.evaluate import evaluate
+    from supportnode.sim.evaluate import evaluate, format_support
 
     labels = _load_labels(args.result_dir)
     truth = _load_truth(args.gt_cloud)
@@ -85,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
         labels["object"].astype(np.int64),
         np.asarray(truth["surface"]).astype(np.int64),
         np.asarray(truth["object"]).astype(np.int64),
+        None if "supported_by" not in truth else np.asarray(truth["supported_by"]).astype(np.int64),
+        labels["supported_by"],
     )
     s, o = scores["surfaces"], scores["objects"]
     rows = [
@@ -98,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
         ("objects found", f"{o['found']} of {o['gt_count']}"),
         ("objects merged", f"{o['merged']} {o['merged_groups'] or ''}".rstrip()),
         ("objects split", f"{o['split']}"),
+        ("supported_by right", format_support(o["support"])),
     ]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:

@@ -4,6 +4,7 @@ supportnode sim shelf --points 200000 --out shelf.ply
 supportnode sim table_chairs --sensor lidar --preset os128 --frames 5 --out scans/
 supportnode sim kitchen --sensor lidar --preset os128 --frames 50 --out kitchen.mcap
 supportnode sim my_scene.yaml --sensor camera --noise range:0.01 --noise tilt:2,1 --out c.npz
+supportnode sim tabletop --sensor camera --preset kinect --noise kinect --organized --out k.npz
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import argparse
 
 SENSORS = ("sample", "lidar", "camera")
 LIDAR_PRESETS = ("vlp16", "os128")
-CAMERA_PRESETS = ("d435", "vga")
+CAMERA_PRESETS = ("d435", "vga", "kinect")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--preset",
         choices=LIDAR_PRESETS + CAMERA_PRESETS,
         default=None,
-        help="lidar: vlp16 (default) or os128; camera: vga (default) or d435",
+        help="lidar: vlp16 (default) or os128; camera: vga (default), d435 or kinect",
     )
     parser.add_argument(
         "--points", type=int, default=200_000, metavar="N", help="points for --sensor sample"
@@ -44,14 +45,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="SPEC",
-        help="uniform:A, gauss:S, range:S, outliers:F, tilt:ROLL,PITCH (repeatable)",
+        help="uniform:A, gauss:S, range:S, outliers:F, tilt:ROLL,PITCH, kinect[:S] (repeatable)",
+    )
+    parser.add_argument(
+        "--organized",
+        action="store_true",
+        help="camera: one row per pixel, NaN where nothing returns (like a Kinect PCD)",
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument(
         "--frame",
-        choices=("world", "sensor"),
+        choices=("world", "sensor", "optical"),
         default="world",
-        help="coordinates of the written points (default world, z up)",
+        help="coordinates of the written points: world (default, z up), sensor (x forward, "
+        "z up) or optical (camera: z forward, y down)",
     )
     parser.add_argument(
         "--out",
@@ -87,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--preset, --frames and --frame apply to --sensor lidar or camera")
         if noise.range > 0:
             raise ConfigError("range noise follows sensor rays: use --sensor lidar or camera")
+    if args.sensor != "camera" and (noise.kinect > 0 or args.organized or args.frame == "optical"):
+        raise ConfigError("kinect noise, --organized and --frame optical need --sensor camera")
+    if args.sensor == "sample":
         clouds = [simulate.sampled(scene, args.points, args.seed, noise)]
         meta["points"] = args.points
     else:
@@ -104,9 +114,13 @@ def run(args: argparse.Namespace) -> int:
             sensor = DepthCamera.preset(preset)
         # A lidar rides level on a robot; a camera tilts down to look at the target.
         poses = poses_for(scene, args.frames, level=args.sensor == "lidar")
-        clouds = simulate.scans(scene, sensor, poses, args.seed, noise, args.frame)
+        clouds = simulate.scans(
+            scene, sensor, poses, args.seed, noise, args.frame, organized=args.organized
+        )
         meta.update(preset=preset, rate_hz=sensor.rate, frame=args.frame)
     if str(args.out).endswith(".mcap"):
+        if args.organized:
+            raise ConfigError("--organized writes .npz or .ply files, not a recording")
         return _write_recording(args.out, clouds, meta)
     written = write_sim_clouds(args.out, clouds, meta)
     for i, path in enumerate(written):

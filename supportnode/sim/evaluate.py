@@ -2,7 +2,10 @@
 
 Ground truth (simulator contract): ``surface`` and ``object`` (N,) int32, -1 for none.
 Predictions (``supportnode detect``'s labels.npz): ``surface`` and ``object`` (N,) int32 per
-input point in input order, -1 for none. All counts are points; every value in the result is a
+input point in input order, -1 for none. Support, when both sides have it: the truth's
+``supported_by`` (N,) per point (the object each point's object stands on, -1 on a surface) and
+the prediction's ``supported_by`` (C,) per cluster id (result.json's objects: the cluster each
+stands on, -1 on a surface). All counts are points; every value in the result is a
 plain Python int, float, list or dict, ready for JSON.
 """
 
@@ -12,7 +15,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 
-__all__ = ["adjusted_rand_index", "contingency", "evaluate"]
+__all__ = ["adjusted_rand_index", "contingency", "evaluate", "format_support", "supported_by_of"]
 
 MATCH_IOU = 0.5  # a GT surface is found by a predicted one with at least this IoU
 MAJORITY = 0.5  # object found: majority cluster holds >= this of it and is >= this the object
@@ -54,6 +57,36 @@ def adjusted_rand_index(truth: np.ndarray, pred: np.ndarray) -> float:
     if top == expected:  # both partitions trivial (all one cluster, or all singletons)
         return 1.0
     return float((index - expected) / (top - expected))
+
+
+def supported_by_of(objects: list) -> np.ndarray | None:
+    """(C,) int64 supported_by per cluster id from result.json's ``objects`` (each a dict with
+    an integer ``id`` and ``supported_by``, -1 on a surface); None when any object lacks the
+    field (results from before it). InputError naming the object when one is malformed."""
+    if not objects or any(not isinstance(o, dict) or "supported_by" not in o for o in objects):
+        return None
+    by = np.full(len(objects), -1, np.int64)
+    for i, o in enumerate(objects):
+        ids = (o.get("id"), o["supported_by"])
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in ids) or not (
+            0 <= ids[0] < len(objects)
+        ):
+            raise InputError(
+                f"objects[{i}]: expected an integer id and supported_by (-1: a surface)"
+            )
+        by[ids[0]] = ids[1]
+    return by
+
+
+def format_support(support: dict | None) -> str:
+    """'right/objects (stacked right/stacked)' of evaluate()'s objects["support"], or '-'
+    when the detection (or the truth) has no supported_by."""
+    if support is None:
+        return "-"
+    return (
+        f"{support['correct']}/{support['total']} "
+        f"(stacked {support['stacked_correct']}/{support['stacked_total']})"
+    )
 
 
 def _check(name: str, arr: np.ndarray, n: int | None) -> np.ndarray:
@@ -99,7 +132,9 @@ def _surface_scores(ps: np.ndarray, gs: np.ndarray) -> dict:
     }
 
 
-def _object_scores(po: np.ndarray, go: np.ndarray) -> dict:
+def _object_scores(po: np.ndarray, go: np.ndarray) -> tuple[dict, np.ndarray, np.ndarray]:
+    """Object scores, the cluster matched to each GT object (its majority cluster when found,
+    else -1) and the GT object ids, both (G,)."""
     on = go >= 0
     gt_obj, pred = go[on], po[on]
     # Points no cluster claims are singletons for the ARI: being missed together is not
@@ -137,7 +172,7 @@ def _object_scores(po: np.ndarray, go: np.ndarray) -> dict:
     # Split: two or more clusters each hold >= SPLIT_SHARE of the object.
     big = np.bincount(gi[share >= SPLIT_SHARE], minlength=gt_ids.size)
     split = big >= 2
-    return {
+    scores = {
         "points_gt": int(on.sum()),
         "gt_count": int(gt_ids.size),
         "pred_count": int(cl_ids.size),
@@ -150,6 +185,34 @@ def _object_scores(po: np.ndarray, go: np.ndarray) -> dict:
         "found_ids": [int(x) for x in gt_ids[found]],
         "split_ids": [int(x) for x in gt_ids[split]],
     }
+    return scores, np.where(found, maj_cluster, -1), gt_ids
+
+
+def _support_scores(
+    matched: np.ndarray, gt_ids: np.ndarray, go: np.ndarray, gby: np.ndarray, pby: np.ndarray
+) -> dict:
+    """Objects whose matched cluster stands on the cluster matched to the true supporter (or
+    on a surface, -1, as the truth says). matched: (G,) cluster of each found GT object (-1 if
+    not found); gt_ids (G,); go, gby: (N,) truth per point; pby: (C,) per cluster."""
+    on = go >= 0
+    true_by = np.full(gt_ids.size, -1, np.int64)
+    true_by[np.searchsorted(gt_ids, go[on])] = gby[on]  # one value per object
+    cluster_of = dict(zip(gt_ids.tolist(), matched.tolist(), strict=True))
+    want = np.array([-1 if t < 0 else cluster_of.get(int(t), -1) for t in true_by], np.int64)
+    # A supporter that is not found has no cluster to point at: that object cannot be right.
+    possible = (true_by < 0) | (want >= 0)
+    has = matched >= 0
+    got = np.full(gt_ids.size, -2, np.int64)
+    got[has] = pby[matched[has]]
+    ok = has & possible & (got == want)
+    stacked = true_by >= 0
+    return {
+        "correct": int(ok.sum()),
+        "total": int(gt_ids.size),
+        "accuracy": float(ok.mean()) if gt_ids.size else 1.0,
+        "stacked_correct": int((ok & stacked).sum()),
+        "stacked_total": int(stacked.sum()),
+    }
 
 
 def evaluate(
@@ -157,6 +220,8 @@ def evaluate(
     pred_object: np.ndarray,
     gt_surface: np.ndarray,
     gt_object: np.ndarray,
+    gt_supported_by: np.ndarray | None = None,
+    pred_supported_by: np.ndarray | None = None,
 ) -> dict:
     """Surface and object scores of one prediction; all four arrays (N,) integer, -1 = none.
 
@@ -168,15 +233,26 @@ def evaluate(
     singletons), ``found`` (majority cluster holds >= 50% of the object and is >= 50% this
     object), ``merged`` (objects sharing their majority cluster with another) and
     ``merged_groups`` (lists of GT object ids), ``split`` (>= 2 clusters each holding >= 20%
-    of the object), ``missed`` (no point claimed by any cluster).
+    of the object), ``missed`` (no point claimed by any cluster), and ``support`` when both
+    supported_by arrays are given (else None): ``correct`` of ``total`` GT objects are found
+    and their cluster's supported_by is the cluster of the object they stand on (-1 on a
+    surface), ``accuracy``, and the same for the stacked ones (``stacked_correct`` of
+    ``stacked_total``, those standing on an object).
     """
     gs = _check("gt_surface", gt_surface, None)
     n = gs.shape[0]
     go = _check("gt_object", gt_object, n)
     ps = _check("pred_surface", pred_surface, n)
     po = _check("pred_object", pred_object, n)
-    return {
-        "points": int(n),
-        "surfaces": _surface_scores(ps, gs),
-        "objects": _object_scores(po, go),
-    }
+    objects, matched, gt_ids = _object_scores(po, go)
+    objects["support"] = None
+    if gt_supported_by is not None and pred_supported_by is not None:
+        gby = _check("gt_supported_by", gt_supported_by, n)
+        pby = _check("pred_supported_by", pred_supported_by, None)
+        clusters = int(po.max(initial=-1)) + 1
+        if pby.shape[0] < clusters or (pby.size and (pby.min() < -1 or pby.max() >= pby.size)):
+            raise InputError(
+                f"pred_supported_by must give each of the {clusters} clusters a cluster id or -1"
+            )
+        objects["support"] = _support_scores(matched, gt_ids, go, gby, pby)
+    return {"points": int(n), "surfaces": _surface_scores(ps, gs), "objects": objects}

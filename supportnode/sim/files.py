@@ -1,7 +1,10 @@
-"""Simulated clouds on disk: PLY (x y z + role primitive object surface) and NPZ (everything).
+"""Simulated clouds on disk: PLY (x y z + role primitive object surface supported_by
+support_surface) and NPZ (everything).
 
-NPZ keys: points (N, 3) float32, role (N,) int8, primitive / object / surface (N,) int32,
-sensor_pose (4, 4) float64, stamp () float64, tilt_rotation (3, 3) float64, frame () str.
+NPZ keys: points (N, 3) float32, role (N,) int8, primitive / object / surface / supported_by /
+support_surface (N,) int32 (see `SimCloud`),
+sensor_pose (4, 4) float64, stamp () float64, tilt_rotation (3, 3) float64, frame () str, and
+image_shape (2,) (rows, columns) for an organised cloud (NaN rows where a pixel saw nothing).
 Several frames go to ``name_000.ext``, ``name_001.ext``... (a file path) or ``frame_000.npz``...
 (a directory), with a JSON of poses and stamps next to them.
 """
@@ -32,6 +35,8 @@ def write_sim_cloud(path: str | Path, cloud: SimCloud) -> Path:
             "primitive": cloud.primitive,
             "object": cloud.object,
             "surface": cloud.surface,
+            "supported_by": cloud.supported_by,
+            "support_surface": cloud.support_surface,
         }
         write_ply(path, cloud.points.astype(np.float32, copy=False), fields=fields)
     elif path.suffix == ".npz":
@@ -59,19 +64,32 @@ def read_sim_npz(path: str | Path) -> SimCloud:
     """A SimCloud from an NPZ written by `write_sim_cloud`."""
     try:
         with np.load(path) as z:
+            # Files from before the support labels: support unknown, read as none.
+            none = np.full(len(z["object"]), -1, np.int32)
             return SimCloud(
                 points=z["points"],
                 role=z["role"],
                 primitive=z["primitive"],
                 object=z["object"],
                 surface=z["surface"],
+                supported_by=z["supported_by"] if "supported_by" in z else none,
+                support_surface=z["support_surface"] if "support_surface" in z else none,
                 sensor_pose=z["sensor_pose"],
                 stamp=float(z["stamp"]),
                 tilt_rotation=z["tilt_rotation"] if "tilt_rotation" in z else np.eye(3),
                 frame=str(z["frame"]) if "frame" in z else "world",
+                image_shape=_image_shape(z),
             )
     except (OSError, KeyError, ValueError) as err:
         raise CloudFormatError(f"{path}: not a simulator NPZ ({err})") from err
+
+
+def _image_shape(z: Any) -> tuple[int, int] | None:
+    """(rows, columns) of an organised cloud's NPZ, None for an unorganised one."""
+    if "image_shape" not in z:
+        return None
+    rows, cols = (int(v) for v in z["image_shape"])
+    return rows, cols
 
 
 def output_paths(out: str | Path, count: int) -> tuple[list[Path], Path | None]:

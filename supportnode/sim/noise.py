@@ -8,6 +8,8 @@ Specs (repeatable, later ones override earlier ones of the same kind):
 - ``outliers:F``  add round(F * N) points uniformly in the scene's bounding box, role OUTLIER.
 - ``tilt:R,P``    rotate the whole cloud about its frame's origin by roll R and pitch P degrees
   (a missing or wrong IMU); the rotation is kept in `SimCloud.tilt_rotation`.
+- ``kinect`` or ``kinect:S``  a structured-light depth camera's noise, holes and depth steps
+  (`supportnode.sim.depth_noise`), sigmas times S (default 1); depth cameras only.
 """
 
 from __future__ import annotations
@@ -22,18 +24,20 @@ from supportnode.errors import ConfigError
 from supportnode.sim.cloud import ROLE_OUTLIER, SimCloud, concatenate, rotate
 from supportnode.sim.scene import rpy_matrix
 
-_KINDS = ("uniform", "gauss", "range", "outliers", "tilt")
+_KINDS = ("uniform", "gauss", "range", "outliers", "tilt", "kinect")
 
 
 @dataclass(frozen=True)
 class NoiseSpec:
-    """Noise amounts: metres for uniform/gauss/range, a fraction for outliers, degrees for tilt."""
+    """Noise amounts: metres for uniform/gauss/range, a fraction for outliers, degrees for tilt,
+    a scale of the depth-camera model for kinect (0: off)."""
 
     uniform: float = 0.0
     gauss: float = 0.0
     range: float = 0.0
     outliers: float = 0.0
     tilt: tuple[float, float] = (0.0, 0.0)
+    kinect: float = 0.0
 
     @property
     def is_zero(self) -> bool:
@@ -45,6 +49,8 @@ def parse_noise(specs: Iterable[str]) -> NoiseSpec:
     spec = NoiseSpec()
     for text in specs:
         kind, sep, value = text.partition(":")
+        if text == "kinect":
+            kind, sep, value = "kinect", ":", "1"
         if not sep or kind not in _KINDS:
             raise ConfigError(
                 f"noise {text!r}: expected KIND:VALUE with KIND one of {', '.join(_KINDS)}"
@@ -100,6 +106,8 @@ def apply_noise(
             primitive=np.full(n_out, -1, np.int32),
             object=np.full(n_out, -1, np.int32),
             surface=np.full(n_out, -1, np.int32),
+            supported_by=np.full(n_out, -1, np.int32),
+            support_surface=np.full(n_out, -1, np.int32),
         )
         out = concatenate([out, noise])
     return out

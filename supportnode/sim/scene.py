@@ -16,7 +16,7 @@ A scene file::
       - {use: chair, name: chair_a, xyz: [1, 0, 0], rpy: [0, 0, 90]}
       - {kind: group, name: lamp, xyz: [0, 0, 0.5], role: object, object: lamp, children: [...]}
 
-Every primitive has `kind` (box, cylinder, sphere, cone, group) or `use`, an optional `name`,
+Every primitive has `kind` (box, cylinder, sphere, cone, cup, bowl, torus, group) or `use`, an optional `name`,
 `xyz` (metres) and `rpy` (degrees; R = Rz(yaw) Ry(pitch) Rx(roll), child poses compose with their
 parent's), and a `role`: `surface` (box or cylinder; only the +z face is a support surface, its
 other faces are structure; needs `surface: NAME`), `structure`, or `object` (needs `object: NAME`;
@@ -24,7 +24,9 @@ parts sharing a name form one object). Groups and `use` pass `role`, `object` an
 to children that do not set them. Names of objects and surfaces inside a `use` are scoped by the
 instance name ("chair_a/seat"), so two chairs give two seats. Ids are assigned in file order:
 surfaces 0..S-1, objects 0..O-1. Sizes: box `size: [x, y, z]`; cylinder and cone `radius`,
-`height`; sphere `radius` (metres, centred on the pose, see `supportnode.sim.primitives`).
+`height`; sphere `radius`; cup `radius`, `height`, `thickness`; bowl `radius` (rim), `height`,
+`thickness`, `base_radius`; torus `major_radius`, `minor_radius`, optional `arc_deg` (metres and
+degrees, centred on the pose, see `supportnode.sim.primitives`).
 
 Errors raise `SceneError` naming file, line and key.
 """
@@ -32,7 +34,6 @@ Errors raise `SceneError` naming file, line and key.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,153 +41,50 @@ import numpy as np
 import yaml
 
 from supportnode.errors import SceneError
-from supportnode.sim.cloud import ROLE_OBJECT, ROLE_STRUCTURE, ROLE_SURFACE
-from supportnode.sim.primitives import KINDS, Box, Cone, Cylinder, Shape, Sphere
+from supportnode.sim.primitives import KINDS, Bowl, Box, Cone, Cup, Cylinder, Shape, Sphere, Torus
+from supportnode.sim.scene_model import Primitive, Scene, pose_matrix, rpy_matrix
+from supportnode.sim.scene_yaml import LineLoader, LineMap, LineSeq
+
+__all__ = [
+    "Primitive",
+    "Scene",
+    "bundled_scenes",
+    "load_scene",
+    "parse_scene",
+    "pose_matrix",
+    "rpy_matrix",
+    "scene_path",
+]
 
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"  # shipped inside the package
 ROLES = ("surface", "structure", "object")
 _TOP_KEYS = {"name", "description", "trajectory", "define", "primitives"}
 _COMMON_KEYS = {"kind", "name", "xyz", "rpy", "role", "object", "surface"}
-_SHAPE_KEYS = {
+_SHAPE_KEYS = {  # required keys of each kind
     "box": {"size"},
     "cylinder": {"radius", "height"},
     "cone": {"radius", "height"},
     "sphere": {"radius"},
+    "cup": {"radius", "height", "thickness"},
+    "bowl": {"radius", "height", "thickness", "base_radius"},
+    "torus": {"major_radius", "minor_radius"},
     "group": {"children"},
     "use": {"use"},
+}
+_OPTIONAL_KEYS = {"torus": {"arc_deg"}}
+_SHAPES = {
+    "box": Box,
+    "cylinder": Cylinder,
+    "cone": Cone,
+    "sphere": Sphere,
+    "cup": Cup,
+    "bowl": Bowl,
+    "torus": Torus,
 }
 _TRAJ_KEYS = {
     "circle": {"kind", "center", "radius", "target", "start_deg", "arc_deg", "level"},
     "line": {"kind", "start", "end", "target", "level"},
 }
-
-
-@dataclass(frozen=True)
-class Primitive:
-    """One posed shape with its labels.
-
-    pose: (4, 4) float64 shape-to-world transform. role: "surface" | "structure" | "object".
-    object_id / surface_id: -1 when not an object / not a surface. line: line in the scene file.
-    """
-
-    index: int
-    name: str
-    shape: Shape
-    pose: np.ndarray
-    role: str
-    object_id: int
-    surface_id: int
-    line: int
-
-    @property
-    def kind(self) -> str:
-        return self.shape.kind
-
-    def world_aabb(self) -> np.ndarray:
-        """(2, 3) float64 [min, max] world box containing the shape (exact for boxes; for round
-        shapes the box of their bounding cylinder/box), metres."""
-        s = self.shape
-        if isinstance(s, Box):
-            local = s.local_corners()
-        else:
-            r = s.radius
-            h2 = r if isinstance(s, Sphere) else s.height / 2.0
-            local = Box((2 * r, 2 * r, 2 * h2)).local_corners()
-        world = local @ self.pose[:3, :3].T + self.pose[:3, 3]
-        return np.stack([world.min(axis=0), world.max(axis=0)])
-
-
-@dataclass(frozen=True)
-class Scene:
-    """A scene: primitives in file order, surface and object names indexed by id."""
-
-    name: str
-    primitives: tuple[Primitive, ...]
-    surface_names: tuple[str, ...]
-    object_names: tuple[str, ...]
-    description: str = ""
-    trajectory: dict[str, Any] = field(default_factory=dict)
-    source: str = "<string>"
-
-    def bounds(self) -> np.ndarray:
-        """(2, 3) float64 [min, max] world box of all primitives, metres."""
-        boxes = np.stack([p.world_aabb() for p in self.primitives])
-        return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
-
-    def label_table(self) -> dict[str, np.ndarray]:
-        """Per-primitive lookup arrays, each (P,): role of the top face and of other faces
-        (int8), object id and surface id of the top face (int32)."""
-        code = {"surface": ROLE_SURFACE, "structure": ROLE_STRUCTURE, "object": ROLE_OBJECT}
-        is_surf = np.array([p.role == "surface" for p in self.primitives])
-        role = np.array([code[p.role] for p in self.primitives], np.int8)
-        return {
-            "role_top": role,
-            "role_other": np.where(is_surf, ROLE_STRUCTURE, role).astype(np.int8),
-            "object": np.array([p.object_id for p in self.primitives], np.int32),
-            "surface_top": np.array([p.surface_id for p in self.primitives], np.int32),
-        }
-
-
-def rpy_matrix(rpy_deg: tuple[float, float, float] | np.ndarray) -> np.ndarray:
-    """(3, 3) rotation Rz(yaw) Ry(pitch) Rx(roll) from (roll, pitch, yaw) in degrees."""
-    r, p, y = np.radians(np.asarray(rpy_deg, np.float64))
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
-def pose_matrix(xyz: Any = (0, 0, 0), rpy_deg: Any = (0, 0, 0)) -> np.ndarray:
-    """(4, 4) float64 transform from translation (metres) and roll/pitch/yaw (degrees)."""
-    t = np.eye(4)
-    t[:3, :3] = rpy_matrix(rpy_deg)
-    t[:3, 3] = xyz
-    return t
-
-
-# --- YAML with line numbers -------------------------------------------------------------------
-
-
-class _Map(dict):
-    """A mapping that remembers its own line and each key's line (1-based)."""
-
-    line: int = 0
-    key_lines: dict[Any, int]
-
-
-class _Seq(list):
-    line: int = 0
-    item_lines: list[int]
-
-
-class _Loader(yaml.SafeLoader):
-    pass
-
-
-def _construct_map(loader: _Loader, node: yaml.MappingNode) -> _Map:
-    loader.flatten_mapping(node)
-    m = _Map()
-    m.line = node.start_mark.line + 1
-    m.key_lines = {}
-    for k_node, v_node in node.value:
-        key = loader.construct_object(k_node, deep=True)
-        if key in m:
-            raise SceneError(f"{{file}}:{k_node.start_mark.line + 1}: duplicate key {key!r}")
-        m[key] = loader.construct_object(v_node, deep=True)
-        m.key_lines[key] = k_node.start_mark.line + 1
-    return m
-
-
-def _construct_seq(loader: _Loader, node: yaml.SequenceNode) -> _Seq:
-    s = _Seq(loader.construct_object(n, deep=True) for n in node.value)
-    s.line = node.start_mark.line + 1
-    s.item_lines = [n.start_mark.line + 1 for n in node.value]
-    return s
-
-
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_map)
-_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_seq)
 
 
 # --- Parsing ----------------------------------------------------------------------------------
@@ -197,7 +95,7 @@ class _Parser:
 
     def __init__(self, source: str) -> None:
         self.source = source
-        self.defines: _Map = _Map()
+        self.defines: LineMap = LineMap()
         self.prims: list[Primitive] = []
         self.surfaces: dict[str, int] = {}
         self.objects: dict[str, int] = {}
@@ -206,10 +104,12 @@ class _Parser:
     def fail(self, line: int, msg: str) -> SceneError:
         return SceneError(f"{self.source}:{line}: {msg}")
 
-    def line_of(self, m: _Map, key: str) -> int:
-        return m.key_lines.get(key, m.line) if isinstance(m, _Map) else 0
+    def line_of(self, m: LineMap, key: str) -> int:
+        return m.key_lines.get(key, m.line) if isinstance(m, LineMap) else 0
 
-    def numbers(self, m: _Map, key: str, n: int, label: str, positive: bool = False) -> list[float]:
+    def numbers(
+        self, m: LineMap, key: str, n: int, label: str, positive: bool = False
+    ) -> list[float]:
         value = m[key]
         values = value if isinstance(value, list) else [value]
         ok = len(values) == n and all(
@@ -225,14 +125,14 @@ class _Parser:
             )
         return [float(v) for v in values]
 
-    def name_value(self, m: _Map, key: str, label: str) -> str:
+    def name_value(self, m: LineMap, key: str, label: str) -> str:
         value = m[key]
         if isinstance(value, bool) or not isinstance(value, (str, int)):
             raise self.fail(self.line_of(m, key), f"{label}: key {key!r} must be a name or an id")
         return str(value)
 
     def parse(self, doc: Any) -> None:
-        if not isinstance(doc, _Map):
+        if not isinstance(doc, LineMap):
             raise self.fail(getattr(doc, "line", 1), "a scene must be a mapping with 'primitives'")
         for key in doc:
             if key not in _TOP_KEYS:
@@ -241,7 +141,7 @@ class _Parser:
         if "primitives" not in doc:
             raise self.fail(doc.line, "missing key 'primitives'")
         if "define" in doc:
-            if not isinstance(doc["define"], _Map):
+            if not isinstance(doc["define"], LineMap):
                 raise self.fail(doc.key_lines["define"], "'define' must map names to lists")
             self.defines = doc["define"]
         self.children(doc["primitives"], self.line_of(doc, "primitives"), np.eye(4), {}, "", "", [])
@@ -258,17 +158,17 @@ class _Parser:
         path: str,
         stack: list[str],
     ) -> None:
-        if not isinstance(items, _Seq):
+        if not isinstance(items, LineSeq):
             raise self.fail(line, f"{path or 'primitives'}: expected a list of primitives")
         for i, item in enumerate(items):
             label_path = f"{path}.{i}" if path else str(i)
-            if not isinstance(item, _Map):
+            if not isinstance(item, LineMap):
                 raise self.fail(items.item_lines[i], f"primitive {label_path}: expected a mapping")
             self.item(item, parent, inherited, scope, label_path, stack)
 
     def item(
         self,
-        m: _Map,
+        m: LineMap,
         parent: np.ndarray,
         inherited: dict[str, Any],
         scope: str,
@@ -288,7 +188,7 @@ class _Parser:
                 raise self.fail(
                     self.line_of(m, "kind"), f"{label}: unknown kind {kind!r} (expected {expected})"
                 )
-        allowed = _COMMON_KEYS | _SHAPE_KEYS[kind]
+        allowed = _COMMON_KEYS | _SHAPE_KEYS[kind] | _OPTIONAL_KEYS.get(kind, set())
         for key in m:
             if key not in allowed:
                 raise self.fail(
@@ -337,16 +237,18 @@ class _Parser:
         self.leaf(m, kind, name, label, pose, labels)
 
     def leaf(
-        self, m: _Map, kind: str, name: str, label: str, pose: np.ndarray, labels: dict[str, Any]
+        self, m: LineMap, kind: str, name: str, label: str, pose: np.ndarray, labels: dict[str, Any]
     ) -> None:
-        if kind == "box":
-            shape: Shape = Box(tuple(self.numbers(m, "size", 3, label, positive=True)))  # type: ignore[arg-type]
-        elif kind == "sphere":
-            shape = Sphere(self.numbers(m, "radius", 1, label, positive=True)[0])
-        else:
-            radius = self.numbers(m, "radius", 1, label, positive=True)[0]
-            height = self.numbers(m, "height", 1, label, positive=True)[0]
-            shape = Cylinder(radius, height) if kind == "cylinder" else Cone(radius, height)
+        sizes: dict[str, Any] = {}
+        for key in _SHAPE_KEYS[kind] | _OPTIONAL_KEYS.get(kind, set()):
+            if key == "size":
+                sizes[key] = tuple(self.numbers(m, key, 3, label, positive=True))
+            elif key in m:
+                sizes[key] = self.numbers(m, key, 1, label, positive=True)[0]
+        try:
+            shape: Shape = _SHAPES[kind](**sizes)
+        except ValueError as err:  # a shape's own consistency checks (a wall thicker than a cup)
+            raise self.fail(m.line, f"{label}: {err}") from None
 
         if "role" not in labels:
             raise self.fail(m.line, f"{label}: missing key 'role'")
@@ -380,11 +282,11 @@ class _Parser:
 
 
 def _parse_trajectory(p: _Parser, doc: Any) -> dict[str, Any]:
-    if not isinstance(doc, _Map) or "trajectory" not in doc:
+    if not isinstance(doc, LineMap) or "trajectory" not in doc:
         return {}
     t = doc["trajectory"]
     line = doc.key_lines["trajectory"]
-    if not isinstance(t, _Map) or t.get("kind") not in _TRAJ_KEYS:
+    if not isinstance(t, LineMap) or t.get("kind") not in _TRAJ_KEYS:
         raise p.fail(line, "trajectory: expected a mapping with kind circle or line")
     allowed = _TRAJ_KEYS[t["kind"]]
     for key in t:
@@ -413,7 +315,7 @@ def parse_scene(text: str, source: str = "<string>", name: str = "scene") -> Sce
     """A `Scene` from YAML text; `source` names the file in error messages."""
     parser = _Parser(source)
     try:
-        doc = yaml.load(text, Loader=_Loader)  # safe: _Loader derives from SafeLoader
+        doc = yaml.load(text, Loader=LineLoader)  # safe: LineLoader derives from SafeLoader
     except SceneError as err:  # duplicate key raised from inside the loader
         raise SceneError(str(err).replace("{file}", source)) from None
     except yaml.YAMLError as err:

@@ -7,24 +7,45 @@ x right, y down) if needed.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
-from supportnode.sim.cloud import ROLE_SURFACE, SimCloud, empty_cloud, rotate
+from supportnode.sim.cloud import (
+    OPTICAL_FROM_BODY,
+    ROLE_SURFACE,
+    SimCloud,
+    empty_cloud,
+    rotate,
+)
 from supportnode.sim.scene import Scene
 
-# Rotation taking body (x fwd, y left, z up) vectors to optical (z fwd, x right, y down) ones.
-OPTICAL_FROM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+__all__ = [
+    "OPTICAL_FROM_BODY",
+    "DepthCamera",
+    "Lidar",
+    "raycast",
+    "sample_scene",
+    "surface_normals",
+]
+
 _CHUNK = 1 << 20  # points generated per face per step when sampling: bounds temporary memory
 
 
 def _labels(scene: Scene, prim: np.ndarray, top: np.ndarray) -> tuple[np.ndarray, ...]:
-    """role (int8), object (int32), surface (int32) for hits on primitives `prim` ((N,) int)."""
+    """role (int8), object, surface, supported_by, support_surface (int32) for hits on
+    primitives `prim` ((N,) int)."""
     table = scene.label_table()
     role = np.where(top, table["role_top"][prim], table["role_other"][prim]).astype(np.int8)
     surface = np.where(role == ROLE_SURFACE, table["surface_top"][prim], -1).astype(np.int32)
-    return role, table["object"][prim], surface
+    return (
+        role,
+        table["object"][prim],
+        surface,
+        table["supported_by"][prim],
+        table["support_surface"][prim],
+    )
 
 
 def sample_scene(
@@ -83,6 +104,8 @@ def sample_scene(
         out.primitive[sl] = i
         out.object[sl] = prim.object_id
         out.surface[sl] = prim.surface_id if is_surface else -1
+        out.supported_by[sl] = table["supported_by"][i]
+        out.support_surface[sl] = table["support_surface"][i]
         filled = 0
         while filled < count:  # draw, drop hidden points, draw again for what is missing
             want = min(_CHUNK, count - filled)
@@ -152,6 +175,19 @@ def raycast(
     return best, prim, top
 
 
+def surface_normals(scene: Scene, primitive: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 outward unit world normals at world surface `points` (N, 3) of the
+    primitives `primitive` (N,) int; NaN rows where primitive < 0."""
+    out = np.full((len(points), 3), np.nan)
+    for k in np.unique(primitive[primitive >= 0]):
+        idx = np.flatnonzero(primitive == k)
+        p = scene.primitives[k]
+        rot = p.pose[:3, :3]
+        local = rotate(points[idx].astype(np.float64) - p.pose[:3, 3], rot.T)
+        out[idx] = rotate(p.shape.normals(local), rot)
+    return out
+
+
 def _scan(
     scene: Scene,
     dirs_sensor: np.ndarray,
@@ -159,24 +195,48 @@ def _scan(
     min_range: float,
     max_range: float,
     stamp: float,
+    projector: np.ndarray | None = None,
+    image_shape: tuple[int, int] | None = None,
 ) -> SimCloud:
-    """Cast sensor-frame unit rays from `pose` (4x4 sensor-to-world); world-frame SimCloud."""
+    """Cast sensor-frame unit rays from `pose` (4x4 sensor-to-world); world-frame SimCloud.
+
+    projector: (3,) sensor-frame position of a structured-light projector: hits it cannot see
+    are lost (the shadow beside a near object). image_shape: keep a NaN row for every ray
+    that returns nothing (an organised cloud) instead of dropping it."""
     pose = np.asarray(pose, np.float64)
     dirs = rotate(dirs_sensor, pose[:3, :3])
     t, prim, top = raycast(scene, pose[:3, 3], dirs, max_range)
     # A return closer than min_range is blocked by the near object, not seen through it.
-    keep = np.flatnonzero((prim >= 0) & (t >= min_range))
-    points = pose[:3, 3] + dirs[keep] * t[keep, None]
-    role, obj, surface = _labels(scene, prim[keep], top[keep])
-    return SimCloud(
-        points=points.astype(np.float32),
+    ok = (prim >= 0) & (t >= min_range)
+    points = pose[:3, 3] + dirs * np.where(ok, t, np.nan)[:, None]
+    if projector is not None:
+        ok &= ~_shadowed(scene, pose[:3, :3] @ projector + pose[:3, 3], points, ok)
+    keep = np.arange(len(t)) if image_shape is not None else np.flatnonzero(ok)
+    role, obj, surface, by, under = _labels(scene, np.where(ok, prim, 0)[keep], top[keep])
+    cloud = SimCloud(
+        points=points[keep].astype(np.float32),
         role=role,
         primitive=prim[keep],
         object=obj,
         surface=surface,
+        supported_by=by,
+        support_surface=under,
         sensor_pose=pose.copy(),
         stamp=float(stamp),
+        image_shape=image_shape,
     )
+    return cloud if image_shape is None else cloud.without_returns(~ok)
+
+
+def _shadowed(scene: Scene, source: np.ndarray, points: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(N,) bool: points (where `ok`) that something hides from the world position `source`."""
+    out = np.zeros(len(points), bool)
+    idx = np.flatnonzero(ok)
+    ray = points[idx] - source
+    dist = np.sqrt(np.einsum("ij,ij->i", ray, ray))
+    t, _, _ = raycast(scene, source, ray / dist[:, None], float(dist.max(initial=0.0)))
+    out[idx] = t < dist - 1e-3  # 1 mm: the point's own surface is no blocker
+    return out
 
 
 @dataclass(frozen=True)
@@ -220,7 +280,10 @@ class Lidar:
 @dataclass(frozen=True)
 class DepthCamera:
     """Pinhole depth camera, `width` x `height` pixels, horizontal field of view in degrees,
-    square pixels, principal point at the image centre. Looks along +x of its body frame."""
+    square pixels, principal point at the image centre. Looks along +x of its body frame.
+
+    baseline: metres from the camera to a structured-light projector on its right (body -y),
+    as on a Kinect; points the projector cannot light are lost (0: no projector shadow)."""
 
     width: int = 640
     height: int = 480
@@ -228,28 +291,56 @@ class DepthCamera:
     min_range: float = 0.2
     max_range: float = 10.0
     rate: float = 30.0
+    baseline: float = 0.0
 
     @classmethod
     def preset(cls, name: str) -> DepthCamera:
-        """`d435` (848 x 480, 87 deg hfov, 30 Hz) or `vga` (640 x 480, 70 deg)."""
-        presets = {"d435": cls(848, 480, 87.0, 0.2, 10.0, 30.0), "vga": cls()}
+        """`d435` (848 x 480, 87 deg hfov, 30 Hz), `vga` (640 x 480, 70 deg) or `kinect`
+        (Kinect v1: 640 x 480, focal 525 px, 0.45-4.5 m, projector 7.5 cm to the side)."""
+        presets = {
+            "d435": cls(848, 480, 87.0, 0.2, 10.0, 30.0),
+            "vga": cls(),
+            "kinect": cls(
+                640, 480, float(np.degrees(2 * np.arctan(320 / 525))), 0.45, 4.5, 30.0, 0.075
+            ),
+        }
         if name not in presets:
             raise ValueError(f"unknown camera preset {name!r} (expected {', '.join(presets)})")
         return presets[name]
 
+    @property
+    def focal_px(self) -> float:
+        """Focal length in pixels."""
+        return float((self.width / 2.0) / np.tan(np.radians(self.hfov_deg) / 2.0))
+
     def directions(self) -> np.ndarray:
         """(height * width, 3) float64 unit rays in the body frame, row-major from the top-left
-        pixel. Max range applies along the ray (not the optical depth)."""
-        f = (self.width / 2.0) / np.tan(np.radians(self.hfov_deg) / 2.0)
-        u = np.arange(self.width) + 0.5 - self.width / 2.0
-        v = np.arange(self.height) + 0.5 - self.height / 2.0
-        vv, uu = np.meshgrid(v, u, indexing="ij")
-        d = np.stack([np.full(uu.shape, f), -uu, -vv], axis=-1).reshape(-1, 3)
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        pixel (read-only: computed once per camera). Max range applies along the ray (not the
+        optical depth)."""
+        return _camera_rays(self)
 
-    def scan(self, scene: Scene, pose: np.ndarray, stamp: float = 0.0) -> SimCloud:
-        """One depth image from `pose` (4x4 body-to-world) as a world-frame SimCloud."""
-        return _scan(scene, self.directions(), pose, self.min_range, self.max_range, stamp)
+    def scan(
+        self, scene: Scene, pose: np.ndarray, stamp: float = 0.0, organized: bool = False
+    ) -> SimCloud:
+        """One depth image from `pose` (4x4 body-to-world) as a world-frame SimCloud;
+        `organized` keeps one row per pixel (NaN where nothing returns), like a Kinect PCD."""
+        projector = np.array([0.0, -self.baseline, 0.0]) if self.baseline > 0 else None
+        shape = (self.height, self.width) if organized else None
+        return _scan(
+            scene, self.directions(), pose, self.min_range, self.max_range, stamp, projector, shape
+        )
+
+
+@functools.cache
+def _camera_rays(camera: DepthCamera) -> np.ndarray:
+    f = camera.focal_px
+    u = np.arange(camera.width) + 0.5 - camera.width / 2.0
+    v = np.arange(camera.height) + 0.5 - camera.height / 2.0
+    vv, uu = np.meshgrid(v, u, indexing="ij")
+    d = np.stack([np.full(uu.shape, f), -uu, -vv], axis=-1).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    d.setflags(write=False)
+    return d
 
 
 Sensor = Lidar | DepthCamera

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.errors import ConfigError
 from supportnode.sim.cloud import SimCloud
+from supportnode.sim.depth_noise import kinect_noise
 from supportnode.sim.noise import NoiseSpec, apply_noise, apply_tilt
 from supportnode.sim.scene import Scene
 from supportnode.sim.sensors import DepthCamera, Lidar, sample_scene
@@ -31,6 +33,8 @@ def finish(
 def sampled(scene: Scene, n_points: int, seed: int = 0, noise: NoiseSpec | None = None) -> SimCloud:
     """A mesh-sampled world-frame cloud of `n_points` (plus outliers if requested)."""
     noise = noise or NoiseSpec()
+    if noise.kinect > 0:
+        raise ConfigError("kinect noise follows a depth camera's pixels: scan with DepthCamera")
     cloud = sample_scene(scene, n_points, seed)
     # A separate stream for noise keeps the noise-free points identical across noise settings.
     return finish(cloud, scene, noise, np.random.default_rng([seed, 1]), "world")
@@ -43,11 +47,26 @@ def scans(
     seed: int = 0,
     noise: NoiseSpec | None = None,
     frame: str = "world",
+    organized: bool = False,
 ) -> list[SimCloud]:
-    """One scan per pose ((F, 4, 4) sensor-to-world), stamps i / sensor.rate seconds."""
+    """One scan per pose ((F, 4, 4) sensor-to-world), stamps i / sensor.rate seconds.
+
+    organized: a depth camera's scans keep a row per pixel (NaN where nothing returns). The
+    depth-camera noise (`kinect`) draws from its own stream, `(seed, frame index, 2)`."""
     noise = noise or NoiseSpec()
+    if (noise.kinect > 0 or organized) and not isinstance(sensor, DepthCamera):
+        raise ConfigError("kinect noise and organised clouds need the depth camera")
     out = []
     for i, pose in enumerate(poses):
-        cloud = sensor.scan(scene, pose, stamp=i / sensor.rate)
+        stamp = i / sensor.rate
+        if isinstance(sensor, Lidar):
+            cloud = sensor.scan(scene, pose, stamp=stamp)
+        else:
+            cloud = sensor.scan(scene, pose, stamp, organized or noise.kinect > 0)
+            if noise.kinect > 0:
+                rng = np.random.default_rng([seed, i, 2])
+                cloud = kinect_noise(cloud, scene, sensor, rng, noise.kinect)
+                if not organized:
+                    cloud = cloud.select(np.isfinite(cloud.points[:, 0]))
         out.append(finish(cloud, scene, noise, np.random.default_rng([seed, i]), frame))
     return out

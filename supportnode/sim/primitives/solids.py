@@ -1,88 +1,22 @@
-"""Geometric primitives in their own frame: ray intersection and area sampling, vectorised.
-
-Frames follow URDF/SDF: every shape is centred on its origin. A box spans +-size/2; a cylinder has
-its axis along z and spans z in [-height/2, height/2]; a cone has its base disc (radius) at
-z = -height/2 and its apex at z = +height/2; a sphere is centred. The "top" face is the face whose
-outward normal is +z in the shape's frame (box +z face, cylinder top disc); only that face of a
-`surface` primitive is a support surface.
-
-Rays: origins `o` and unit directions `d`, both (N, 3) float64 in the shape frame. Intersections
-return `t` (N,) float64 metres along the ray (inf for a miss; hits closer than EPS are ignored so a
-ray leaving a surface does not hit it again) and `top` (N,) bool (the hit is on the top face).
-"""
+"""The closed solids: box, cylinder, sphere, cone (frames and ray conventions: see the package)."""
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-EPS = 1e-9
-KINDS = ("box", "cylinder", "sphere", "cone")
-
-# A face sampler draws n points uniformly by area: (rng, n) -> (n, 3) float64 in the shape frame.
-Sampler = Callable[[np.random.Generator, int], np.ndarray]
-
-
-@dataclass(frozen=True)
-class Face:
-    """One face of a shape: its area (m^2), whether it is the top (+z) or bottom (-z) face in
-    the shape frame, and a sampler."""
-
-    area: float
-    top: bool
-    sample: Sampler
-    bottom: bool = False
-
-
-def _quiet(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """Silence numpy warnings: misses and rays parallel to a face legitimately produce inf/NaN,
-    which the intersection code turns into misses."""
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return fn(*args, **kwargs)
-
-    return wrapper
-
-
-def _nearest_positive(*ts: np.ndarray) -> np.ndarray:
-    """Per ray, the smallest candidate t > EPS (inf if none). Each ts[i] is (N,) float64."""
-    stack = np.stack(ts)
-    stack[~(stack > EPS)] = np.inf  # also turns NaN (degenerate rays) into misses
-    return stack.min(axis=0)
-
-
-@_quiet
-def _disc_hit(o: np.ndarray, d: np.ndarray, z: float, radius: float) -> np.ndarray:
-    """t where rays cross the plane z inside a disc of `radius` about the z axis (else inf)."""
-    t = (z - o[:, 2]) / d[:, 2]
-    x = o[:, 0] + t * d[:, 0]
-    y = o[:, 1] + t * d[:, 1]
-    return np.where(x * x + y * y <= radius * radius, t, np.inf)
-
-
-@_quiet
-def _quadratic_roots(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Both real roots of a t^2 + 2 b t + c = 0 (NaN where none). `a` near 0 gives the linear root."""
-    sq = np.sqrt(b * b - a * c)
-    linear = np.abs(a) < 1e-12
-    t1 = np.where(linear, -c / (2.0 * b), (-b - sq) / a)
-    t2 = np.where(linear, np.nan, (-b + sq) / a)
-    return t1, t2
-
-
-def _disc_sampler(z: float, radius: float) -> Sampler:
-    def sample(rng: np.random.Generator, n: int) -> np.ndarray:
-        r = radius * np.sqrt(rng.random(n))  # sqrt: uniform by area, not by radius
-        a = rng.random(n) * (2.0 * np.pi)
-        return np.column_stack([r * np.cos(a), r * np.sin(a), np.full(n, z)])
-
-    return sample
+from supportnode.sim.primitives.base import (
+    EPS,
+    Face,
+    disc_hit,
+    disc_sampler,
+    nearest_positive,
+    pick,
+    quadratic_roots,
+    quiet,
+    unit,
+)
 
 
 @dataclass(frozen=True)
@@ -100,16 +34,26 @@ class Box:
     def bounding_radius(self) -> float:
         return float(np.linalg.norm(self.half))
 
-    def local_corners(self) -> np.ndarray:
-        """(8, 3) corners of the box, metres."""
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        return signs * self.half
+    @property
+    def half_extent(self) -> np.ndarray:
+        """(3,) half sizes of the shape-frame box around the shape, metres."""
+        return self.half
+
+    def normals(self, p: np.ndarray) -> np.ndarray:
+        """(N, 3) outward unit normals at shape-frame surface points p (N, 3): the face the
+        point lies nearest."""
+        gap = np.abs(p) - self.half  # 0 on the face of that axis, negative on the others
+        axis = np.argmax(gap, axis=1)
+        out = np.zeros_like(p)
+        rows = np.arange(len(p))
+        out[rows, axis] = np.where(p[rows, axis] >= 0, 1.0, -1.0)
+        return out
 
     def contains(self, p: np.ndarray, eps: float) -> np.ndarray:
         """(N,) bool: shape-frame points (N, 3) inside the box grown by eps."""
         return np.all(np.abs(p) <= self.half + eps, axis=1)
 
-    @_quiet
+    @quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Slab test: entry t (exit t when the origin is inside) and whether it is the +z face."""
         half = self.half
@@ -177,7 +121,21 @@ class Cylinder:
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         return (r2 <= (self.radius + eps) ** 2) & (np.abs(p[:, 2]) <= self.height / 2.0 + eps)
 
-    @_quiet
+    @property
+    def half_extent(self) -> np.ndarray:
+        """(3,) half sizes of the shape-frame box around the shape, metres."""
+        return np.array([self.radius, self.radius, self.height / 2.0])
+
+    def normals(self, p: np.ndarray) -> np.ndarray:
+        """(N, 3) outward unit normals at shape-frame surface points p (N, 3)."""
+        rho = np.hypot(p[:, 0], p[:, 1])
+        h2 = self.height / 2.0
+        side = unit(p * [1.0, 1.0, 0.0])
+        up = np.broadcast_to([0.0, 0.0, 1.0], p.shape)
+        dist = [np.abs(rho - self.radius), np.abs(p[:, 2] - h2), np.abs(p[:, 2] + h2)]
+        return pick(dist, [side, up, -up])
+
+    @quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, h2 = self.radius, self.height / 2.0
         a = d[:, 0] ** 2 + d[:, 1] ** 2
@@ -186,9 +144,9 @@ class Cylinder:
         sq = np.sqrt(b * b - a * c)
         sides = [(-b - sq) / a, (-b + sq) / a]
         sides = [np.where(np.abs(o[:, 2] + s * d[:, 2]) <= h2, s, np.inf) for s in sides]
-        t_top = _disc_hit(o, d, h2, r)
-        t_bottom = _disc_hit(o, d, -h2, r)
-        t = _nearest_positive(sides[0], sides[1], t_top, t_bottom)
+        t_top = disc_hit(o, d, h2, r)
+        t_bottom = disc_hit(o, d, -h2, r)
+        t = nearest_positive(sides[0], sides[1], t_top, t_bottom)
         top = np.isfinite(t) & (t == t_top) & (d[:, 2] < 0)
         return t, top
 
@@ -203,8 +161,8 @@ class Cylinder:
         disc = np.pi * r * r
         return [
             Face(2.0 * np.pi * r * h, False, side),
-            Face(disc, True, _disc_sampler(h / 2.0, r)),
-            Face(disc, False, _disc_sampler(-h / 2.0, r), bottom=True),
+            Face(disc, True, disc_sampler(h / 2.0, r)),
+            Face(disc, False, disc_sampler(-h / 2.0, r), bottom=True),
         ]
 
 
@@ -223,12 +181,21 @@ class Sphere:
         """(N,) bool: shape-frame points (N, 3) inside the sphere grown by eps."""
         return np.einsum("ij,ij->i", p, p) <= (self.radius + eps) ** 2
 
-    @_quiet
+    @property
+    def half_extent(self) -> np.ndarray:
+        """(3,) half sizes of the shape-frame box around the shape, metres."""
+        return np.full(3, float(self.radius))
+
+    def normals(self, p: np.ndarray) -> np.ndarray:
+        """(N, 3) outward unit normals at shape-frame surface points p (N, 3)."""
+        return unit(p)
+
+    @quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         b = np.einsum("ij,ij->i", o, d)
         c = np.einsum("ij,ij->i", o, o) - self.radius**2
-        t1, t2 = _quadratic_roots(np.ones_like(b), b, c)
-        t = _nearest_positive(t1, t2)
+        t1, t2 = quadratic_roots(np.ones_like(b), b, c)
+        t = nearest_positive(t1, t2)
         return t, np.zeros(t.shape, bool)
 
     def faces(self) -> list[Face]:
@@ -260,7 +227,23 @@ class Cone:
         r = np.sqrt(p[:, 0] ** 2 + p[:, 1] ** 2)
         return (r <= r_at + eps) & (np.abs(p[:, 2]) <= h / 2.0 + eps)
 
-    @_quiet
+    @property
+    def half_extent(self) -> np.ndarray:
+        """(3,) half sizes of the shape-frame box around the shape, metres."""
+        return np.array([self.radius, self.radius, self.height / 2.0])
+
+    def normals(self, p: np.ndarray) -> np.ndarray:
+        """(N, 3) outward unit normals at shape-frame surface points p (N, 3)."""
+        k = self.radius / self.height
+        rho = np.hypot(p[:, 0], p[:, 1])
+        # The lateral surface is f = rho - k (h/2 - z) = 0, whose gradient is (x/rho, y/rho, k).
+        grad = np.column_stack([p[:, 0] / np.maximum(rho, 1e-12), p[:, 1] / np.maximum(rho, 1e-12)])
+        side = unit(np.column_stack([grad, np.full(len(p), k)]))
+        lateral = np.abs(rho - k * (self.height / 2.0 - p[:, 2])) / np.hypot(1.0, k)
+        base = np.abs(p[:, 2] + self.height / 2.0)
+        return pick([lateral, base], [side, np.broadcast_to([0.0, 0.0, -1.0], p.shape)])
+
+    @quiet
     def intersect(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         h2 = self.height / 2.0
         k2 = (self.radius / self.height) ** 2
@@ -269,11 +252,11 @@ class Cone:
         a = d[:, 0] ** 2 + d[:, 1] ** 2 - k2 * d[:, 2] ** 2
         b = o[:, 0] * d[:, 0] + o[:, 1] * d[:, 1] + k2 * w0 * d[:, 2]
         c = o[:, 0] ** 2 + o[:, 1] ** 2 - k2 * w0 * w0
-        roots = _quadratic_roots(a, b, c)
+        roots = quadratic_roots(a, b, c)
         # The quadric is a double cone; keep only the nappe below the apex.
         sides = [np.where(np.abs(o[:, 2] + s * d[:, 2]) <= h2, s, np.inf) for s in roots]
-        t_base = _disc_hit(o, d, -h2, self.radius)
-        t = _nearest_positive(sides[0], sides[1], t_base)
+        t_base = disc_hit(o, d, -h2, self.radius)
+        t = nearest_positive(sides[0], sides[1], t_base)
         return t, np.zeros(t.shape, bool)
 
     def faces(self) -> list[Face]:
@@ -289,8 +272,5 @@ class Cone:
 
         return [
             Face(np.pi * r * slant, False, side),
-            Face(np.pi * r * r, False, _disc_sampler(-h / 2.0, r), bottom=True),
+            Face(np.pi * r * r, False, disc_sampler(-h / 2.0, r), bottom=True),
         ]
-
-
-Shape = Box | Cylinder | Sphere | Cone
