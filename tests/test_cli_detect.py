@@ -215,7 +215,7 @@ def test_align_puts_the_sensor_at_the_camera(tmp_path, capsys):
     """A camera-frame cloud: --align takes the camera at the frame's origin, so the shelf board
     it sees from below is no surface (main reported it 0.4 m above the camera);
     --sensor-origin still overrides."""
-    cloud, _ = camera_views.room_with_shelf(np.random.default_rng(5))
+    cloud, _ = camera_views.room_with_shelf(5)
     path = tmp_path / "cam.npy"
     np.save(path, cloud)
     out = tmp_path / "o"
@@ -249,7 +249,7 @@ def test_millimetre_cloud_is_flagged_and_units_mm_finds_the_table(table_cloud, t
 
 
 def test_no_surface_says_what_to_check_and_the_advice_works(tmp_path, capsys):
-    cloud, _ = camera_views.tabletop(np.random.default_rng(6), 45.0)
+    cloud, _ = camera_views.tabletop(6, 45.0)
     path = tmp_path / "table.npy"
     np.save(path, cloud)
     out = tmp_path / "o"
@@ -264,7 +264,7 @@ def test_no_surface_says_what_to_check_and_the_advice_works(tmp_path, capsys):
 
 
 def test_bare_wall_refusal_advises_a_hint_that_works(tmp_path, capsys):
-    cloud, _ = camera_views.wall(np.random.default_rng(7))
+    cloud, _ = camera_views.wall(7)
     path = tmp_path / "wall.npy"
     np.save(path, cloud)
     args = ["detect", str(path), "--align", "--out", str(tmp_path / "o"), "--quiet"]

@@ -160,8 +160,8 @@ def plane_strip(rng: np.random.Generator) -> np.ndarray:
 @pytest.mark.parametrize("yaw", [0.0, 50.0])
 def test_table_view_is_aligned(pitch: float, yaw: float) -> None:
     """A depth camera looking down at a table with a stack of boxes and cans, nothing else in
-    view (like the mOSD scans). main refused it at 30 and 45 deg: "only one bare plane"."""
-    cloud, true_up = camera_views.tabletop(np.random.default_rng(int(pitch + yaw)), pitch, yaw)
+    view (like the mOSD scans). main refused 3 of these 8: "only one bare plane"."""
+    cloud, true_up = camera_views.tabletop(int(pitch + yaw), pitch, yaw)
     est = estimate_gravity(cloud)
     assert angle_deg(est.up, true_up) < 0.2
     assert "resting on them" in est.reason
@@ -176,7 +176,7 @@ def _advised_hint(message: str) -> tuple[float, float, float]:
 
 
 def test_bare_wall_refused_with_advice_that_works() -> None:
-    cloud, _ = camera_views.wall(np.random.default_rng(2))
+    cloud, _ = camera_views.wall(2)
     with pytest.raises(AlignmentError, match="only one bare plane") as err:
         estimate_gravity(cloud)
     hint = _advised_hint(str(err.value))  # its normal toward the camera: (0, 0, -1)
