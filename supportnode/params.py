@@ -228,6 +228,19 @@ class GravityParams:
 
 
 @dataclass(frozen=True)
+class SafeParams:
+    """When a surface is ``safe`` for a planner to put something down on (all must hold)."""
+
+    min_area: float = param(0.10, "smallest footprint area", "m^2", min=0.0)
+    max_flatness: float = param(
+        0.01, "largest rms distance of its points to its plane", "m", min=0.0
+    )
+    max_tilt_deg: float = param(
+        5.0, "largest angle between its normal and up", "deg", min=0.0, max=90.0
+    )
+
+
+@dataclass(frozen=True)
 class DetectParams:
     """Everything `supportnode detect` and the node's detection stage use."""
 
@@ -236,6 +249,7 @@ class DetectParams:
     freespace: FreeSpaceParams = field(default_factory=FreeSpaceParams)
     normals: NormalParams = field(default_factory=NormalParams)
     gravity: GravityParams = field(default_factory=GravityParams)
+    safe: SafeParams = field(default_factory=SafeParams)
     # A lambda because NodeParams is defined below (appended sections keep this file's order).
     node: NodeParams = field(default_factory=lambda: NodeParams())
 
@@ -322,6 +336,12 @@ class NodeParams:
         "has the map's points, beside the detection, or right after the merge when no "
         "detection takes the scan at once; a detection then sees a removed object one scan "
         "longer (false: within the merge, before detecting)",
+    )
+    safe_min_hits: int = param(
+        2,
+        "a surface is safe only once seen in this many detections in a row under one id "
+        "(and the safe section's rules hold)",
+        min=1,
     )
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +11,17 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 REAL_SCANS = REPO.parent / "shared" / "real_scans"
+
+
+def run_cli(*args: str, cwd: Path = REPO, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """``python -m supportnode ARGS`` as a user runs it: a subprocess, output captured."""
+    return subprocess.run(
+        [sys.executable, "-m", "supportnode", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd,
+    )
 
 
 def plane_points(rng, x0, x1, y0, y1, z, n):

@@ -97,3 +97,19 @@ def test_other_bench_scripts_bad_flags_are_one_line_errors(script, args, message
     last = proc.stderr.strip().splitlines()[-1]
     assert last.startswith(f"{script}: error: ") and message in last
     assert "Traceback" not in proc.stderr and proc.stdout == ""
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--repeats", "0"], "--repeats must be at least 1, got 0"),
+        (["nope.pcd"], "nope.pcd: no such file"),
+    ],
+)
+def test_bench_io_bad_flags_are_one_line_errors(args, message):
+    proc = subprocess.run(
+        [sys.executable, str(BENCH.parent / "bench_io.py"), *args],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines()[-1] == f"bench_io.py: error: {message}"

@@ -340,7 +340,7 @@ def test_duplicate_key(tmp_path: Path) -> None:
 def test_merge_keys_rejected(tmp_path: Path) -> None:
     path = write(tmp_path, "base: &b {k: 3}\nobjects:\n  <<: *b\n")
     assert config_error(path) == f"{path}:1: unknown key 'base' (known keys: " + (
-        "surfaces, objects, freespace, normals, gravity, node)"
+        "surfaces, objects, freespace, normals, gravity, safe, node)"
     )
     path = write(tmp_path, "objects: &b\n  k: 3\nnormals:\n  <<: *b\n")
     assert config_error(path) == f"{path}:4: YAML merge keys ('<<') are not supported"

@@ -7,6 +7,7 @@ import struct
 import time
 from pathlib import Path
 
+import lzf_reference
 import numpy as np
 import plyfile
 import pytest
@@ -234,35 +235,50 @@ def test_binary_compressed_fixture_from_another_tool() -> None:
     np.testing.assert_array_equal(cloud.fields["rgb"][0], [0x44, 0x44, 0x42])
 
 
-def test_pure_python_lzf_matches_fixture_and_handles_overlaps() -> None:
+def test_lzf_kernel_matches_reference_on_fixture_and_handles_overlaps() -> None:
     raw = (DATA / "mug_crop_lzf.pcd").read_bytes()
     body = raw[raw.index(b"DATA binary_compressed\n") + 23 :]
     csize, usize = struct.unpack("<II", body[:8])
-    out = _lzf._decompress_py(body[8 : 8 + csize], usize)
-    assert len(out) == usize == 1200 * 16
+    out = _lzf.decompress(body[8 : 8 + csize], usize)
+    assert out.dtype == np.uint8 and out.size == usize == 1200 * 16
+    assert out.tobytes() == lzf_reference.decompress(body[8 : 8 + csize], usize)
     assert np.isnan(np.frombuffer(out, "<f4", 400)).all()  # first 10 image rows are empty
     # "ab" literal, then a back-reference of 7 bytes at distance 2 (overlapping), then "c"
     stream = bytes([1]) + b"ab" + bytes([(5 << 5) | 0, 1]) + bytes([0]) + b"c"
-    assert _lzf._decompress_py(stream, 10) == b"ababababac"
-    # length 7 + extension byte: 9 + 2 = 18... repeated single byte at distance 1
+    assert _lzf.decompress(stream, 10).tobytes() == b"ababababac"
+    # length 7 + extension byte 2: 11 bytes of one repeated byte at distance 1
     stream = bytes([0]) + b"z" + bytes([(7 << 5) | 0, 2, 0])
-    assert _lzf._decompress_py(stream, 12) == b"z" * 12
-    for bad, size in [(stream[:-1], 12), (stream, 11), (bytes([(1 << 5), 5]), 3), (b"\x05ab", 6)]:
-        with pytest.raises(_lzf.LZFError):
-            _lzf._decompress_py(bad, size)
+    assert _lzf.decompress(stream, 12).tobytes() == b"z" * 12
+    bad_streams = [
+        (stream[:-1], 12, "ends inside a token"),
+        (stream, 11, "back-reference outside"),
+        (bytes([(1 << 5), 5]), 3, "back-reference outside"),
+        (b"\x05ab", 6, "literal run past the end"),
+        (b"\x01ab", 3, "expands to 2 bytes, header says 3"),
+    ]
+    for bad, size, message in bad_streams:
+        with pytest.raises(_lzf.LZFError, match=message):
+            _lzf.decompress(bad, size)
+        with pytest.raises(ValueError):
+            lzf_reference.decompress(bad, size)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.binary(min_size=1, max_size=40), min_size=1, max_size=30), st.data())
+def test_lzf_kernel_decodes_back_references_like_the_reference(chunks, data) -> None:
+    # repeated chunks give the greedy compressor back-references of every length and distance
+    picks = data.draw(st.lists(st.integers(0, len(chunks) - 1), max_size=200))
+    payload = b"".join(chunks[i] for i in picks) + bytes(data.draw(st.integers(0, 300)))
+    stream = lzf_reference.compress(payload)
+    assert lzf_reference.decompress(stream, len(payload)) == payload
+    assert _lzf.decompress(stream, len(payload)).tobytes() == payload
 
 
 @pytest.mark.parametrize("size", [0, 1, 31, 32, 33, 1000])
 def test_literal_lzf_round_trip(size: int) -> None:
     data = bytes(np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8))
-    assert _lzf._decompress_py(_lzf.compress_literal(data), size) == data
-
-
-def test_c_lzf_when_available_agrees_with_pure_python() -> None:
-    clzf = pytest.importorskip("lzf")
-    data = (b"table " * 300) + bytes(range(256)) * 4
-    comp = clzf.compress(data)
-    assert _lzf._decompress_py(comp, len(data)) == data == _lzf.decompress(comp, len(data))
+    stream = _lzf.compress_literal(data)
+    assert _lzf.decompress(stream, size).tobytes() == lzf_reference.decompress(stream, size) == data
 
 
 @pytest.mark.real

@@ -104,6 +104,28 @@ def test_stable_ids_and_safe_after_two_scans(rng):
     assert safe[0] == [False, False] and safe[-1] == [True, True]
 
 
+@pytest.mark.parametrize(
+    ("overrides", "first", "last"),
+    [
+        ({"node": {"safe_min_hits": 1}}, [True, True], [True, True]),
+        # the 0.96 m^2 boards are too small for a 1 m^2 minimum; a 0.5 m board is higher
+        ({"safe": {"min_area": 1.0}}, [False, False], [False, False]),
+    ],
+)
+def test_safe_rule_is_configuration(rng, overrides, first, last):
+    from supportnode.config import load_config
+
+    sets = [f"{sec}.{k}={v}" for sec, kv in overrides.items() for k, v in kv.items()]
+    pose = _sensor_pose(0, 0, 1.5)
+    safe = []
+    with Node(load_config(None, sets)) as node:
+        for i in range(3):
+            pts = np.vstack([_platform(rng, 0, 0), _platform(rng, 3, 0, z=0.8)])
+            out = node.process(_cloud(pts - pose[:3, 3], 1.0 + 0.1 * i, seq=i + 1, pose=pose))
+            safe.append([s.safe for s in out.surfaces.surfaces])
+    assert safe[0] == first and safe[-1] == last
+
+
 def test_incremental_equals_full_recompute(rng):
     """Two boards 4 m apart; later scans see only the first, where a box appears."""
     pose = _sensor_pose(0, 0, 1.5)

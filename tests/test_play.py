@@ -4,6 +4,7 @@ files, and the committed sim_scans recordings."""
 
 from __future__ import annotations
 
+import itertools
 import socket
 import subprocess
 import sys
@@ -233,3 +234,28 @@ def test_info_lists_a_recording(recorded, capsys) -> None:
     ]
     # 16 scans over 0.9 s (every 50 ms, but for the 4 diagnostics' slots): 15 / 0.9 = 16.7 Hz
     assert lines["scan"][4] == "Hz" and abs(float(lines["scan"][3]) - 16.7) < 1.5
+
+
+@pytest.mark.parametrize(("extra", "moving"), [((), True), (("--no-restamp",), False)])
+def test_looped_replay_keeps_time_moving_by_default(extra, moving: bool) -> None:
+    # A node resets its map when a stamp goes back ("source restarted"): a loop must not.
+    import signal
+
+    from supportnode.msgs import decode_any
+
+    endpoint = free_endpoint()
+    catcher = Catcher(endpoint, 12)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "supportnode", "play", str(REPO / "sim_scans" / "shelf_lidar.mcap"),
+         "--loop", "--rate", "4", "--endpoint", endpoint, "--connect", "--wait", "0.3", "--quiet",
+         *extra],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        got = catcher.result()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    stamps = [decode_any(frames).stamp for _, frames in got]
+    assert len(stamps) == 12  # two passes of 5 and more
+    assert all(b > a for a, b in itertools.pairwise(stamps)) == moving, stamps

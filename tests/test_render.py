@@ -247,3 +247,55 @@ def test_detect_render_flag_writes_result_png(tmp_path, rng):
     out = tmp_path / "o"
     assert main(["detect", str(cloud), "--out", str(out), "--render", "--quiet"]) == 0
     assert imread(out / "result.png").shape == (1200, 1600, 4)
+
+
+def test_far_outliers_are_drawn_at_the_edge_not_fitted(detected):
+    import dataclasses
+
+    out, _ = detected
+    frame = load_result_dir(out)
+    n = len(frame.points)
+    far = np.tile([[40.0, 35.0, 0.5]], (n // 100, 1))  # 1 % of returns 50 m away
+    frame = dataclasses.replace(frame, points=np.vstack([frame.points, far]),
+                                surface=np.r_[frame.surface, np.full(len(far), -1, np.int32)],
+                                object=None)  # fmt: skip
+    _, ax = draw_frame(frame, size=(800, 600))
+    (x0, x1), (_, y1) = ax.get_xlim(), ax.get_ylim()
+    assert x1 < 3.0 and y1 < 3.0 and x0 > -3.0  # the 3 x 3 m floor fills the picture
+    drawn = ax.collections[0].get_offsets()
+    assert np.isclose(drawn[:, 0], x1).sum() >= len(far) * 0.9  # outliers on the edge
+
+
+def test_color_id_on_an_organised_cloud_with_nan_rows(tmp_path, rng):
+    from supportnode.io.clouds import write_pcd
+
+    x0, x1, y0, y1, z = TABLE
+    pts = np.vstack(
+        [
+            plane_points(rng, -1.5, 1.5, -1.5, 1.5, 0.0, 20000),
+            plane_points(rng, x0, x1, y0, y1, z, 8000),
+            box_points(rng, BOX_CENTER, BOX_SIZE, 3000),
+        ]
+    )
+    pts[::9] = np.nan  # a depth camera's missing pixels
+    cloud = tmp_path / "org.pcd"
+    write_pcd(cloud, pts, data="binary")
+    out = tmp_path / "o"
+    assert main(["detect", str(cloud), "--out", str(out), "--quiet"]) == 0
+    frame = load_result_dir(out)
+    result = json.loads((out / "result.json").read_text())
+    assert frame.notes == []
+    assert frame.object is not None
+    assert (frame.object == 0).sum() == result["objects"][0]["point_count"]
+
+
+def test_render_draws_the_cloud_when_nothing_was_found(tmp_path, rng):
+    cloud = tmp_path / "noise.ply"
+    write_ply(cloud, rng.uniform(0, 1, (3000, 3)))
+    out = tmp_path / "o"
+    assert main(["detect", str(cloud), "--out", str(out), "--render", "--quiet"]) == 0
+    assert json.loads((out / "result.json").read_text())["surfaces"] == []
+    frame = load_result_dir(out)
+    assert len(frame.points) == 3000
+    img = imread(out / "result.png")
+    assert img.shape[:2] == (1200, 1600)

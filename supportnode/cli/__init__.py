@@ -11,15 +11,37 @@ from collections.abc import Sequence
 from supportnode import __version__
 from supportnode.errors import SupportNodeError
 
+DESCRIPTION = """\
+Find support surfaces (floors, table tops, shelf boards) and the objects standing on them in
+point clouds: offline on files and recordings, or live as a ZeroMQ node beside your robot's
+software."""
+
+EXAMPLES = """\
+examples:
+  supportnode launch demo --duration 20         the live demo: a replayed lidar, the node, a planner
+  supportnode detect scan.pcd --render          surfaces and objects of one cloud, into out/scan/
+  supportnode detect run.mcap --every 5         every 5th scan of a recording (also .bag, .db3, folders)
+  supportnode run --input run.mcap --output results.mcap   the node offline, as fast as it can
+  supportnode run --config my.yaml              the node live: scans in on :5555, results out on :5556
+  supportnode config dump -o my.yaml            every parameter with its default, unit and range
+
+'supportnode COMMAND --help' tells a command's options; docs/cli.md has the details."""
+
 # name -> (module, one-line help). Each module defines `add_arguments(parser)` and `run(args) -> int`;
 # modules are imported only when their command runs, so optional extras stay optional.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "detect": ("supportnode.cli.detect", "find support surfaces and objects in one cloud file"),
+    "detect": (
+        "supportnode.cli.detect",
+        "find support surfaces and objects in a cloud, or in every scan of a recording",
+    ),
     "sim": ("supportnode.cli.sim", "simulate scenes with ground truth (sampled, lidar, camera)"),
     "eval": ("supportnode.cli.evaluate", "score a detect output against simulator ground truth"),
     "render": ("supportnode.cli.render", "draw a detection result as a PNG"),
     "launch": ("supportnode.cli.launch", "start a launch file's processes, stop them in order"),
-    "run": ("supportnode.cli.run", "run the node: scans in, surfaces and obstacles out"),
+    "run": (
+        "supportnode.cli.run",
+        "run the node: scans in, surfaces and obstacles out (--input REC: offline)",
+    ),
     "record": ("supportnode.cli.record", "record published messages into an MCAP file"),
     "play": (
         "supportnode.cli.play",
@@ -29,14 +51,23 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "echo": ("supportnode.cli.echo", "print a topic's messages, decoded (text or JSON lines)"),
     "hz": ("supportnode.cli.hz", "rate, period jitter and bandwidth of a topic, once a second"),
     "keys": ("supportnode.cli.keys", "make a CURVE key pair for encrypted, authenticated sockets"),
-    "view": ("supportnode.cli.view", "show the node's topics or a recording live in Foxglove"),
+    "view": (
+        "supportnode.cli.view",
+        "show the node's topics or a recording live in Foxglove or Rerun",
+    ),
+    "config": ("supportnode.cli.config", "print the default configuration, list shipped files"),
 }
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The argument parser; only ``command``'s module is imported (for its arguments), so one
     command's optional dependencies never stand in the way of another."""
-    parser = argparse.ArgumentParser(prog="supportnode", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="supportnode",
+        description=DESCRIPTION,
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--version", action="version", version=f"supportnode {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module_name, help_text) in COMMANDS.items():
@@ -60,7 +91,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SupportNodeError as err:
         print(f"supportnode {args.command}: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except BrokenPipeError:  # `supportnode detect ... | head`: the reader has all it wants
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except KeyboardInterrupt as err:
+        detail = getattr(err, "detail", "")  # cli._console.Interrupted: what was left behind
+        print(
+            f"supportnode {args.command}: interrupted" + (f" {detail}" if detail else ""),
+            file=sys.stderr,
+        )
         return 130
 
 

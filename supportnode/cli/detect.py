@@ -1,15 +1,19 @@
-"""`supportnode detect CLOUD`: surfaces, objects and free space in one cloud file."""
+"""`supportnode detect CLOUD`: surfaces, objects and free space in one cloud file, or in every
+scan of a recording (MCAP, ROS 2, ROS 1) or folder of clouds."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import statistics
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from supportnode.cli._common import add_config_arguments
+from supportnode.cli._common import add_config_arguments, add_rerun_arguments, positive_seconds
+from supportnode.cli._console import Interrupted, print_table, progress
+from supportnode.cli._sequence import add_sequence_arguments, process_sequence
 
 if TYPE_CHECKING:
     import numpy as np
@@ -19,7 +23,11 @@ if TYPE_CHECKING:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("cloud", help="point cloud file (.ply .pcd .xyz .txt .csv .npy .npz .obj)")
+    parser.add_argument(
+        "cloud",
+        help="point cloud file (.ply .pcd .xyz .txt .csv .npy .npz .obj .las .laz), or a "
+        "sequence: a recording (.mcap .bag .db3), a ROS 2 bag folder or a folder of clouds",
+    )
     add_config_arguments(parser, "surfaces.method=seed")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: out/<cloud name>)")
     parser.add_argument(
@@ -37,15 +45,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--units",
         choices=("m", "cm", "mm"),
-        help="length unit of the file (default m; a cloud that looks like cm or mm is "
-        "flagged on stderr); outputs are in metres",
+        help="length unit of the clouds' points (default m; a cloud that looks like cm or mm "
+        "is flagged on stderr); outputs are in metres, poses stay metres",
     )
     parser.add_argument("--no-objects", action="store_true", help="surfaces only")
     parser.add_argument(
         "--render", action="store_true", help="also draw result.png (needs the viz extra)"
     )
+    add_rerun_arguments(parser, "--view", "the result")
     parser.add_argument(
         "--quiet", action="store_true", help="print nothing but errors and warnings"
+    )
+    add_sequence_arguments(parser, "sequences (recordings, bags and folders)")
+    parser.add_argument(
+        "--duration", type=positive_seconds, metavar="S", help="read S seconds from --start"
     )
 
 
@@ -60,48 +73,70 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from supportnode.config import config_to_dict, load_config
+    from supportnode.config import load_config
+    from supportnode.io.scans import is_sequence
+
+    params = load_config(args.config, args.overrides)
+    name = Path(args.cloud).stem
+    out_dir = Path(args.out) if args.out else Path("out") / name
+    if is_sequence(args.cloud):
+        return _run_sequence(args, params, out_dir)
+    return _run_cloud(args, params, name, out_dir)
+
+
+# ---------------------------------------------------------------------------- one cloud
+
+
+def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) -> int:
+    from supportnode.config import config_to_dict
     from supportnode.io.results import write_detection
     from supportnode.io.units import UNITS
     from supportnode.kernels import runtime
     from supportnode.pipeline import detect
 
     t0 = time.perf_counter()
-    params = load_config(args.config, args.overrides)
-    # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart, so
-    # that the stage timings are the work on this cloud.
-    kernels_time = runtime.warm()
-    t = time.perf_counter()
-    cloud, unit, guess = _read(args.cloud, args.units)
-    read_time = time.perf_counter() - t
-    name = Path(args.cloud).stem
-    out_dir = Path(args.out) if args.out else Path("out") / name
-    detection = detect(
-        cloud.points,
-        params,
-        align=args.align,
-        objects=not args.no_objects,
-        sensor_origin=_sensor_origin(args, cloud),
-        origin_assumed=args.sensor_origin is None,
-    )
-    detection.timings = {"kernels": kernels_time, "read": read_time, **detection.timings}
+    stages = 3 + bool(args.render)
+    with progress(f"detect {args.cloud}", stages, "stages", args.quiet) as bar:
+        bar.advance(0, "reading")
+        # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart,
+        # so that the stage timings are the work on this cloud.
+        kernels_time = runtime.warm()
+        t = time.perf_counter()
+        cloud, unit, guess = _read(args.cloud, args.units)
+        read_time = time.perf_counter() - t
+        bar.advance(1, f"detecting in {len(cloud.points):,} points")
+        detection = detect(
+            cloud.points,
+            params,
+            align=args.align,
+            objects=not args.no_objects,
+            sensor_origin=_sensor_origin(args, cloud),
+            origin_assumed=args.sensor_origin is None,
+        )
+        detection.timings = {"kernels": kernels_time, "read": read_time, **detection.timings}
+        points = cloud.points if detection.rotation is None else cloud.points @ detection.rotation.T
+        bar.advance(1, "writing")
+        t = time.perf_counter()
+        extra = {"units": {"file": unit, "metres_per_unit": UNITS[unit]}}
+        try:
+            write_detection(out_dir, name, cloud, points, detection, config_to_dict(params), extra)
+            if args.render:
+                from supportnode.render import render_result
+
+                bar.advance(1, "rendering")
+                render_result(out_dir, out_dir / "result.png")
+        except KeyboardInterrupt as err:
+            raise Interrupted(f"while writing: partial output left in {out_dir}/") from err
+        write_time = time.perf_counter() - t
+        bar.advance(1)
     if detection.gravity is not None and detection.gravity.warning:
         print(f"supportnode detect: warning: {detection.gravity.warning}", file=sys.stderr)
     if not detection.surfaces.surfaces:
         print(_nothing_found(args, guess), file=sys.stderr)
-    points = cloud.points if detection.rotation is None else cloud.points @ detection.rotation.T
-    t = time.perf_counter()
-    extra = {"units": {"file": unit, "metres_per_unit": UNITS[unit]}}
-    written = write_detection(
-        out_dir, name, cloud, points, detection, config_to_dict(params), extra
-    )
-    if args.render:
-        from supportnode.render import render_result
-
-        written.append(render_result(out_dir, out_dir / "result.png"))
-    write_time = time.perf_counter() - t
     if not args.quiet:
-        print(_summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0))
+        _summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0)
+    if args.view or args.save:
+        _rerun(args, params, points, detection)
     return 0
 
 
@@ -124,6 +159,8 @@ def _read(path: str, unit: str | None) -> tuple[Cloud, str, UnitsGuess | None]:
     scale = UNITS[unit]
     if scale != 1.0:
         cloud.points = cloud.points * scale
+        if cloud.origin is not None:
+            cloud.origin = cloud.origin * scale
         if cloud.viewpoint is not None:
             cloud.viewpoint = np.concatenate([cloud.viewpoint[:3] * scale, cloud.viewpoint[3:]])
     return cloud, unit, None
@@ -158,33 +195,154 @@ def _nothing_found(args: argparse.Namespace, guess: UnitsGuess | None) -> str:
     )
 
 
-def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -> str:
-    lines = [
+def _rerun(args: argparse.Namespace, params: Any, points: Any, detection: Any) -> None:
+    """The cloud (surface points red, objects by id, the rest grey) and what was found."""
+    import numpy as np
+
+    from supportnode.detection.messages import detection_messages
+    from supportnode.view.rerun_scene import RerunScene
+
+    colors = np.full((len(points), 3), 150, np.uint8)
+    if detection.objects is not None:
+        obj = detection.objects.labels
+        palette = np.random.default_rng(0).integers(40, 230, (max(int(obj.max()) + 1, 1), 3))
+        colors[obj >= 0] = palette[obj[obj >= 0]]
+    colors[detection.surfaces.labels >= 0] = (220, 50, 50)
+    surfaces, obstacles = detection_messages(detection, params.safe, 0.0, "cloud")
+    with RerunScene("save" if args.save else args.view, args.save) as scene:
+        scene.log_points(0.0, points, colors)
+        scene.log_surfaces(surfaces)
+        if obstacles is not None:
+            scene.log_obstacles(obstacles)
+        if scene.url is not None:
+            print(f"rerun: open {scene.url}  (Ctrl-C to stop)", flush=True)
+            _wait_for_ctrl_c()
+    if args.save and not args.quiet:
+        print(f"wrote {args.save} (open it with: rerun {args.save})")
+
+
+def _wait_for_ctrl_c() -> None:
+    import threading
+
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+
+
+def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -> None:
+    dropped = cloud.dropped_nonfinite
+    print(
         f"{path}: {len(cloud.points):,} points"
-        + (
-            f" ({cloud.dropped_nonfinite:,} NaN/Inf rows dropped)"
-            if cloud.dropped_nonfinite
-            else ""
+        + (f" ({dropped:,} NaN/Inf rows dropped)" if dropped else "")
+    )
+    if cloud.origin is not None:
+        print(
+            "origin: " + ", ".join(f"{v:.3f}" for v in cloud.origin) + " subtracted (result.json)"
         )
-    ]
     if detection.gravity is not None:
-        lines.append(
+        print(
             f"gravity: tilt {detection.gravity.tilt_deg:.2f} deg corrected "
             f"({detection.gravity.reason})"
         )
     free = {f.surface_id: f for f in detection.free_space}
-    lines.append(
-        f"{'surface':>7} {'height m':>9} {'area m2':>8} {'points':>9} {'free m2':>8} {'disc r m':>8}"
-    )
+    rows = []
     for s in detection.surfaces.surfaces:
         f = free.get(s.id)
-        fa = f"{f.free_area:8.2f}" if f else f"{'-':>8}"
-        fr = f"{f.disc_radius:8.2f}" if f else f"{'-':>8}"
-        lines.append(f"{s.id:>7} {s.height:9.3f} {s.area:8.2f} {s.point_count:9,} {fa} {fr}")
+        rows.append(
+            (
+                s.id,
+                f"{s.height:.3f}",
+                f"{s.area:.2f}",
+                f"{s.point_count:,}",
+                f"{f.free_area:.2f}" if f else "-",
+                f"{f.disc_radius:.2f}" if f else "-",
+            )
+        )
+    print_table(("surface", "height m", "area m2", "points", "free m2", "disc r m"), rows)
     if detection.objects is not None:
         on = sum(c.surface_id is not None for c in detection.objects.clusters)
-        lines.append(f"objects: {len(detection.objects.clusters)} clusters ({on} on a surface)")
+        print(f"objects: {len(detection.objects.clusters)} clusters ({on} on a surface)")
     stages = ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in detection.timings.items())
-    lines.append(f"time: {stages}, write {write_time * 1000:.0f} ms; total {total:.2f} s")
-    lines.append(f"wrote {out_dir}/ (result.json, labels.npz, *_detected.ply, *_not_detected.ply)")
-    return "\n".join(lines)
+    print(f"time: {stages}, write {write_time * 1000:.0f} ms; total {total:.2f} s")
+    print(f"wrote {out_dir}/ (result.json, labels.npz, *_detected.ply, *_not_detected.ply)")
+
+
+# ---------------------------------------------------------------------------- sequences
+
+
+def _run_sequence(args: argparse.Namespace, params: Any, out_dir: Path) -> int:
+    if args.render or args.sensor_origin is not None or args.view or args.save:
+        from supportnode.errors import SupportNodeError
+
+        raise SupportNodeError(
+            "--render, --view, --save and --sensor-origin are for one cloud; a sequence's "
+            "scans carry their poses (see them with: supportnode view OUT/results.mcap --rerun)"
+        )
+    t0 = time.perf_counter()
+    per_scan: list[tuple[int, int, float]] = []  # surfaces, objects, seconds
+
+    def handle(scan: Any, results: Any) -> None:
+        per_scan.append(_detect_scan(scan, params, args, results))
+
+    topic, _, selection = process_sequence(
+        "detect", args.cloud, args, out_dir / "results.mcap", handle
+    )
+    if not args.quiet:
+        _sequence_summary(args.cloud, topic, per_scan, selection, out_dir, time.perf_counter() - t0)
+    return 0
+
+
+def _detect_scan(scan: Any, params: Any, args: argparse.Namespace, results: Any) -> tuple:
+    """One scan of a sequence, in its pose's frame when it has one (the map frame)."""
+    import numpy as np
+
+    from supportnode.detection.messages import detection_messages
+    from supportnode.geometry.transform import pose_matrix, transform_points
+    from supportnode.io.units import UNITS
+    from supportnode.pipeline import detect
+
+    t = time.perf_counter()
+    points, frame = scan.points * UNITS[args.units or "m"], scan.frame_id
+    # Without a pose a scan is in its sensor's frame: the sensor at its origin (an assumption
+    # `detect` drops when alignment finds that origin on the floor).
+    origin = np.zeros(3) if args.align else None
+    if scan.pose is not None:
+        pose = pose_matrix(scan.pose.translation, scan.pose.rotation)
+        points = transform_points(points, pose[:3, :3], pose[:3, 3])
+        origin, frame = pose[:3, 3], params.node.frame_id
+    det = detect(
+        points,
+        params,
+        align=args.align,
+        objects=not args.no_objects,
+        sensor_origin=origin,
+        origin_assumed=scan.pose is None,
+    )
+    surfaces, obstacles = detection_messages(det, params.safe, scan.stamp, frame, scan.seq)
+    results.write(scan, surfaces, obstacles, det.timings)
+    n_objects = 0 if obstacles is None else len(obstacles.clusters)
+    return len(surfaces.surfaces), n_objects, time.perf_counter() - t
+
+
+def _sequence_summary(path, topic, per_scan, selection, out_dir: Path, total: float) -> None:
+    skipped = ", ".join(f"{n} {why}" for why, n in selection.skipped.items())
+    print(
+        f"{path}: {len(per_scan)} scans on topic {topic!r}"
+        + (f" ({skipped} skipped)" if skipped else "")
+    )
+    if per_scan:
+        s, o, t = zip(*per_scan, strict=True)
+        rows = [
+            ("surfaces", min(s), f"{statistics.median(s):g}", max(s)),
+            ("objects", min(o), f"{statistics.median(o):g}", max(o)),
+            (
+                "ms per scan",
+                f"{min(t) * 1e3:.0f}",
+                f"{statistics.median(t) * 1e3:.0f}",
+                f"{max(t) * 1e3:.0f}",
+            ),
+        ]
+        print_table(("per scan", "min", "median", "max"), rows)
+    print(f"time: total {total:.2f} s")
+    print(f"wrote {out_dir}/results.mcap (surfaces, obstacles) and {out_dir}/results.jsonl")

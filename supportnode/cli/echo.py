@@ -21,6 +21,11 @@ from supportnode.cli._common import int_at_least, positive_seconds
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 # Messages kept when printing falls behind (a slow terminal); older ones are dropped.
 _KEEP_NEWEST = 1000
+# Silence after which echo says what it waits for, s.
+_QUIET_S = 2.0
+# A stamp within this of the receive time is wall-clock time and gets an age; others
+# (simulated time, a replay without --restamp) would show a meaningless one, s.
+_NEAR_NOW_S = 600.0
 # Arrays up to this many elements appear in full in --json output; larger ones as dtype/shape.
 _SMALL_ARRAY = 16
 
@@ -62,8 +67,9 @@ def run(args: argparse.Namespace) -> int:
             rcvhwm=64,
         ) as sub:
             oversized = 0
+            waiting = f"messages on topic {args.topic!r} from {args.endpoint}"
             while args.count is None or shown < args.count:
-                frames = sub.recv(args.timeout)
+                frames = _recv_announcing(sub, args.timeout, waiting if shown == 0 else None)
                 if sub.oversized != oversized and sub.last_oversized is not None:
                     oversized = sub.oversized
                     topic, size = sub.last_oversized
@@ -96,6 +102,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _recv_announcing(sub: Any, timeout: float | None, waiting: str | None) -> Any:
+    """``sub.recv(timeout)``; when ``waiting`` is given and 2 s pass in silence, says on
+    stderr what echo waits for (a wrong endpoint or topic shows at once, not never)."""
+    import sys
+
+    if waiting is None or (timeout is not None and timeout <= _QUIET_S):
+        return sub.recv(timeout)
+    frames = sub.recv(_QUIET_S)
+    if frames is not None:
+        return frames
+    print(
+        f"supportnode echo: waiting for {waiting} (nothing for {_QUIET_S:.0f} s; "
+        "is the publisher running, and is this its endpoint and topic?)",
+        file=sys.stderr,
+        flush=True,
+    )
+    return sub.recv(None if timeout is None else timeout - _QUIET_S)
+
+
 # --- text -----------------------------------------------------------------------------------
 
 
@@ -103,7 +128,8 @@ def format_message(msg: Any, topic: str, size: int, received: float | None = Non
     """A readable block for one decoded message (ends with a ``---`` line)."""
     from supportnode.msgs import Diagnostics, ObstacleClusters, PointCloud, SupportSurfaces
 
-    age = "" if received is None else f"  (age {received - msg.stamp:.3f} s)"
+    near = received is not None and abs(received - msg.stamp) < _NEAR_NOW_S
+    age = f"  (age {received - msg.stamp:.3f} s)" if near else ""
     lines = [
         f"topic: {topic}  type: {type(msg).__name__}  seq: {msg.seq}  bytes: {size}",
         f"stamp: {msg.stamp:.6f}{age}  frame_id: {msg.frame_id or '-'}",

@@ -129,9 +129,9 @@ def run(args: argparse.Namespace) -> int:
         ("objects split", f"{o['split']}"),
         ("supported_by right", format_support(o["support"])),
     ]
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k:<{width}}  {v}")
+    from supportnode.cli._console import print_table
+
+    print_table(("score", "value"), rows, left=2)
     if args.json is not None:
         scores["result_dir"] = str(args.result_dir)
         scores["gt_cloud"] = str(args.gt_cloud)

@@ -8,7 +8,11 @@ from supportnode.cli._common import positive_seconds
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help="launch file (YAML list of processes, see launch/*.yaml)")
+    parser.add_argument(
+        "file",
+        help="launch file (YAML list of processes), or the name of a shipped one: demo, "
+        "example_pubsub (see: supportnode config list)",
+    )
     parser.add_argument(
         "--set",
         dest="overrides",
@@ -44,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     for text in args.overrides:
         parse_override(text)  # a malformed override fails here, not in every child
-    launch = load_launch(args.file)
+    launch = load_launch(_launch_path(args.file))
     if args.check:
         for spec in launch.processes:
             print(f"{spec.name}: {shlex.join(spec.argv(args.overrides))}")
@@ -65,3 +69,14 @@ def run(args: argparse.Namespace) -> int:
         os.dup2(devnull, 1)
         os.dup2(devnull, 2)
     return code
+
+
+def _launch_path(text: str) -> str:
+    """A path as given, or a shipped launch file's when ``text`` is a bare name of one."""
+    import os
+
+    if os.path.exists(text) or os.sep in text:
+        return text
+    from supportnode.share import find_shipped
+
+    return str(find_shipped("launch", text))

@@ -14,7 +14,7 @@ import queue
 import threading
 from typing import Any
 
-from supportnode.cli._common import add_config_arguments
+from supportnode.cli._common import add_config_arguments, add_tf_arguments, tf_options
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,8 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--restamp",
-        action="store_true",
-        help="set each message's stamp to the wall clock when sent",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="set each message's stamp to the wall clock when sent (default: on with --loop, "
+        "so that a looped replay's time keeps moving and the node's map is not reset)",
     )
     parser.add_argument("--topic", default="scan", help="folder of clouds: topic (default scan)")
     parser.add_argument(
@@ -73,6 +75,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress, only the summary")
     add_config_arguments(parser, "node.scan_endpoint=tcp://127.0.0.1:6000")
+    add_tf_arguments(parser)
 
 
 def _positive(text: str) -> float:
@@ -97,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
 
     from supportnode.io.sources import open_source
 
+    if args.restamp is None:
+        args.restamp = args.loop
     endpoint, bind = args.endpoint, not args.connect
     if endpoint is None:
         from supportnode.config import load_config
@@ -111,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        with open_source(args.source, topic=args.topic, hz=args.hz, frame_id=args.frame_id) as src:
+        folder = {"topic": args.topic, "hz": args.hz, "frame_id": args.frame_id}
+        with open_source(args.source, **folder, **tf_options(args)) as src:
             return Player(src, args, stop).run(endpoint, bind)
     finally:
         for s, h in old.items():

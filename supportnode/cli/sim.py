@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 
+from supportnode.cli._console import progress
+
 SENSORS = ("sample", "lidar", "camera")
 LIDAR_PRESETS = ("vlp16", "os128")
 CAMERA_PRESETS = ("d435", "vga", "kinect")
@@ -18,6 +20,7 @@ CAMERA_PRESETS = ("d435", "vga", "kinect")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", help="bundled scene name (e.g. shelf) or path to a scene YAML")
+    parser.add_argument("--quiet", action="store_true", help="no progress, no list of files")
     parser.add_argument(
         "--sensor",
         choices=SENSORS,
@@ -114,21 +117,30 @@ def run(args: argparse.Namespace) -> int:
             sensor = DepthCamera.preset(preset)
         # A lidar rides level on a robot; a camera tilts down to look at the target.
         poses = poses_for(scene, args.frames, level=args.sensor == "lidar")
-        clouds = simulate.scans(
-            scene, sensor, poses, args.seed, noise, args.frame, organized=args.organized
-        )
+        with progress(f"sim {scene.name}", len(poses), "frames", args.quiet) as bar:
+            clouds = simulate.scans(
+                scene,
+                sensor,
+                poses,
+                args.seed,
+                noise,
+                args.frame,
+                organized=args.organized,
+                on_scan=lambda i: bar.advance(1),
+            )
         meta.update(preset=preset, rate_hz=sensor.rate, frame=args.frame)
     if str(args.out).endswith(".mcap"):
         if args.organized:
             raise ConfigError("--organized writes .npz or .ply files, not a recording")
-        return _write_recording(args.out, clouds, meta)
+        return _write_recording(args.out, clouds, meta, args.quiet)
     written = write_sim_clouds(args.out, clouds, meta)
     for i, path in enumerate(written):
-        print(f"{path} ({len(clouds[i])} points)" if i < len(clouds) else path)
+        if not args.quiet:
+            print(f"{path} ({len(clouds[i])} points)" if i < len(clouds) else path)
     return 0
 
 
-def _write_recording(out: str, clouds: list, meta: dict) -> int:
+def _write_recording(out: str, clouds: list, meta: dict, quiet: bool) -> int:
     """A recording `supportnode play` replays: the frames as PointCloud messages on topic
     `scan`, in the sensor frame with the sensor pose (as a driver sends them), 1/rate apart;
     written through the same conversion as `supportnode record --from FOLDER`."""
@@ -148,5 +160,6 @@ def _write_recording(out: str, clouds: list, meta: dict) -> int:
         ):
             for m in src.messages():
                 writer.write(m.frames, receive_time=m.time)
-    print(f"{out} ({len(clouds)} scans on topic scan)")
+    if not quiet:
+        print(f"{out} ({len(clouds)} scans on topic scan)")
     return 0

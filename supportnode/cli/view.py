@@ -1,8 +1,10 @@
-"""`supportnode view`: show the node's topics live in Foxglove, or a recording.
+"""`supportnode view`: show the node's topics live in Foxglove or Rerun, or a recording.
 
     supportnode view                                   # live: subscribe, serve ws://127.0.0.1:8765
     supportnode view RECORDING.mcap                    # replay it to the viewer, recorded timing
     supportnode view RECORDING.mcap --out fox.mcap     # convert: an MCAP Foxglove opens directly
+    supportnode view --rerun                           # live in Rerun's viewer (--rerun web: browser)
+    supportnode view [RECORDING.mcap] --save run.rrd   # a Rerun file instead
 
 Live, it subscribes to the node's results (``--endpoint``: surfaces, obstacles, diagnostics, map) and
 to the scans (``--scan-endpoint``, unless ``--no-scan``), converts each message to Foxglove's
@@ -18,7 +20,8 @@ import sys
 import threading
 from typing import Any
 
-from supportnode.cli._common import positive_number, positive_seconds
+from supportnode.cli._common import add_rerun_arguments, positive_number, positive_seconds
+from supportnode.cli._console import progress
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_SCAN_ENDPOINT = "tcp://127.0.0.1:5555"
@@ -83,6 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=positive_seconds, metavar="S", help="stop after S seconds"
     )
     parser.add_argument("--quiet", action="store_true", help="print only errors")
+    add_rerun_arguments(parser, "--rerun", "the node (or SOURCE) instead of Foxglove")
 
 
 def _port(text: str) -> int:
@@ -101,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
 
     from supportnode.view import ViewError, require_foxglove
 
+    if args.rerun or args.save:
+        return _rerun(args)
     require_foxglove()  # one line with the install command, before anything starts
     if args.out is not None and args.source is None:
         raise ViewError("--out converts a recording: give the recording too")
@@ -146,9 +152,13 @@ def _convert(args: argparse.Namespace) -> int:
     with open_source(args.source, topic=args.scan_topic) as src:
         ctx = foxglove.Context()
         channels = Channels(ctx)
-        with write_mcap(ctx, args.out) as writer:
+        with (
+            write_mcap(ctx, args.out) as writer,
+            progress(f"view {args.source}", _count(src), "messages", args.quiet) as bar,
+        ):
             writer.write_metadata("supportnode", {"converted_from": os.fspath(args.source)})
             for m in src.messages():
+                bar.advance(1)
                 try:
                     msg = m.decode()
                 except ProtocolError as err:
@@ -164,6 +174,12 @@ def _convert(args: argparse.Namespace) -> int:
         f"to {args.out}" + (f" ({skipped} skipped)" if skipped else ""),
     )
     return 0
+
+
+def _count(src: Any) -> int | None:
+    """Messages of every topic of ``src``, when it knows them without reading."""
+    counts = [src.count(t) for t in src.topics()]
+    return None if None in counts else sum(c for c in counts if c is not None)
 
 
 def _ns(seconds: float) -> int:
@@ -199,6 +215,12 @@ def _serve(args: argparse.Namespace, stop: threading.Event) -> int:
 
 
 def _live(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels: Any) -> None:
+    _receive(args, stop, lambda topic, msg, t: channels.log(bridge.convert(msg, topic), _ns(t)))
+
+
+def _receive(args: argparse.Namespace, stop: threading.Event, handle: Any) -> None:
+    """Subscribe to the node's topics (and the scans) and call ``handle(topic, message,
+    receive time)`` for each until ``stop``, Ctrl-C or ``--duration``."""
     import queue
     import time
 
@@ -219,7 +241,7 @@ def _live(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels
                 topic, msg, received = inbox.get(timeout=0.1)
             except queue.Empty:
                 continue
-            channels.log(bridge.convert(msg, topic), _ns(received))
+            handle(topic, msg, received)
     finally:
         stop.set()
         for r in receivers:
@@ -320,3 +342,57 @@ def _replay(args: argparse.Namespace, stop: threading.Event, bridge: Any, channe
         # Keep serving, so that the last scene stays on screen until the user is done.
         _say(args, "end of the recording; Ctrl-C to stop")
         stop.wait(None if end is None else max(0.0, end - time.monotonic()))
+
+
+# ------------------------------------------------------------------------------------- rerun
+
+
+def _rerun(args: argparse.Namespace) -> int:
+    """The node's topics (or SOURCE's messages, as fast as they read) into a Rerun scene."""
+    import signal
+
+    from supportnode.view.rerun_scene import RerunScene
+
+    stop = threading.Event()
+    old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with RerunScene("save" if args.save else args.rerun, args.save) as scene:
+            if scene.url is not None:
+                _say(args, f"open {scene.url}")
+            if args.source is None:
+                counter = [0]
+
+                def handle(topic: str, msg: Any, received: float) -> None:
+                    scene.log_message(topic, msg)
+                    counter[0] += 1
+
+                _receive(args, stop, handle)
+                shown = counter[0]
+            else:
+                shown = _rerun_source(args, scene)
+                if scene.url is not None:  # keep serving until the user is done
+                    _say(args, "end of the recording; Ctrl-C to stop")
+                    stop.wait(args.duration)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    _say(args, f"{shown} messages" + (f" written to {args.save}" if args.save else " shown"))
+    return 0
+
+
+def _rerun_source(args: argparse.Namespace, scene: Any) -> int:
+    from supportnode.errors import ProtocolError
+    from supportnode.io.sources import open_source
+
+    shown = 0
+    with open_source(args.source, topic=args.scan_topic) as src:
+        for m in src.messages():
+            try:
+                scene.log_message(m.topic, m.decode())
+            except ProtocolError as err:
+                print(f"supportnode view: skipped: {err}", file=sys.stderr)
+                continue
+            shown += 1
+        for line in src.warnings:
+            print(f"supportnode view: warning: {line}", file=sys.stderr)
+    return shown

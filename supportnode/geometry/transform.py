@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["transform_points"]
+__all__ = ["pose_matrix", "quaternion_matrix", "slerp", "transform_points"]
 
 
 def transform_points(
@@ -31,3 +31,39 @@ def transform_points(
         if translation is not None:
             col += float(translation[i])
     return out
+
+
+def quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation of the quaternion ``q`` = (x, y, z, w) (normalised here)."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def pose_matrix(translation: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(4, 4) homogeneous transform of a translation (3,) metres and a quaternion (x, y, z, w)."""
+    m = np.eye(4)
+    m[:3, :3] = quaternion_matrix(q)
+    m[:3, 3] = np.asarray(translation, dtype=np.float64)
+    return m
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) a fraction ``s`` of the way from ``q0`` to ``q1`` along
+    the shorter arc (s outside [0, 1] extrapolates)."""
+    a = np.asarray(q0, dtype=np.float64) / np.linalg.norm(q0)
+    b = np.asarray(q1, dtype=np.float64) / np.linalg.norm(q1)
+    dot = float(a @ b)
+    if dot < 0:  # q and -q are one rotation: take the short way
+        b, dot = -b, -dot
+    if dot > 0.9995:  # nearly equal: linear is exact enough and avoids dividing by sin ~ 0
+        out = a + s * (b - a)
+        return out / np.linalg.norm(out)
+    theta = np.arccos(min(1.0, dot))
+    out = (np.sin((1 - s) * theta) * a + np.sin(s * theta) * b) / np.sin(theta)
+    return out / np.linalg.norm(out)

@@ -27,6 +27,7 @@ class RawCloud:
     width: int | None = None
     height: int | None = None
     viewpoint: np.ndarray | None = None
+    origin: np.ndarray | None = None  # (3,) metres subtracted from the file's coordinates
 
 
 def loadtxt_lines(

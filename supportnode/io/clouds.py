@@ -1,7 +1,9 @@
-"""Point-cloud files: read PLY, PCD, XYZ/TXT/CSV, NPY/NPZ and OBJ; write PLY, PCD, NPY and NPZ.
+"""Point-cloud files: read PLY, PCD, XYZ/TXT/CSV, NPY/NPZ, OBJ and LAS/LAZ; write PLY, PCD, NPY
+and NPZ.
 
 Every reader returns a :class:`Cloud` whose points are finite (N, 3) float64 in the file's own
-units (the library never rescales; e.g. some time-of-flight PCDs are in millimetres). Rows with a
+units (the library never rescales; e.g. some time-of-flight PCDs are in millimetres); LAS/LAZ
+survey coordinates are made local by subtracting ``origin``. Rows with a
 NaN/Inf coordinate are dropped and counted; ``source_index`` maps kept rows back to the file.
 Any problem with a file raises :class:`~supportnode.errors.CloudFormatError` with a one-line
 message that starts with the path.
@@ -18,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from supportnode.errors import CloudFormatError
-from supportnode.io import _pcd, _ply, _text
+from supportnode.io import _las, _pcd, _ply, _text
 from supportnode.io._common import RawCloud, combine_rgb, to_uint8_colour
 
 __all__ = ["Cloud", "read_cloud", "write_cloud", "write_pcd", "write_ply"]
 
-READ_EXTENSIONS = (".ply", ".pcd", ".xyz", ".txt", ".csv", ".npy", ".npz", ".obj")
+READ_EXTENSIONS = (".ply", ".pcd", ".xyz", ".txt", ".csv", ".npy", ".npz", ".obj", ".las", ".laz")
 WRITE_EXTENSIONS = (".ply", ".pcd", ".npy", ".npz")
 
 
@@ -33,7 +35,8 @@ class Cloud:
 
     ``points`` is (N, 3) float64 in the file's units (metres for our data); every array in
     ``fields`` has N rows, (N,) or (N, k) (``"rgb"`` is (N, 3) uint8); ``source_index`` (N,)
-    int64 is each point's row in the file (row-major pixel index for organised clouds).
+    int64 is each point's row in the file (row-major pixel index for organised clouds);
+    ``origin`` (3,) is what was subtracted from the file's coordinates (LAS/LAZ), else None.
     """
 
     points: np.ndarray
@@ -45,6 +48,7 @@ class Cloud:
     height: int | None = None
     viewpoint: np.ndarray | None = None
     path: str = ""
+    origin: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -53,10 +57,13 @@ class Cloud:
 # ------------------------------------------------------------------------------------- reading
 
 
-def read_cloud(path: str | os.PathLike[str]) -> Cloud:
+def read_cloud(path: str | os.PathLike[str], allow_empty: bool = False) -> Cloud:
     """Read a point cloud, choosing the format by extension (case-insensitive).
 
-    Supported: .ply .pcd .xyz .txt .csv .npy .npz .obj. Raises CloudFormatError on a missing,
+    allow_empty: a file without rows is a Cloud of 0 points (our outputs can be: nothing
+    detected), not an error.
+
+    Supported: .ply .pcd .xyz .txt .csv .npy .npz .obj .las .laz. Raises CloudFormatError on a missing,
     unreadable, malformed, truncated or empty file (including one whose points are all NaN/Inf).
     """
     name = os.fspath(path)
@@ -77,12 +84,15 @@ def read_cloud(path: str | os.PathLike[str]) -> Cloud:
         raise CloudFormatError(f"{name}: cannot read ({err.strerror or err})") from err
     except MemoryError as err:
         raise CloudFormatError(f"{name}: too large to load into memory") from err
-    return _finish(raw, name)
+    return _finish(raw, name, allow_empty)
 
 
-def _finish(raw: RawCloud, name: str) -> Cloud:
+def _finish(raw: RawCloud, name: str, allow_empty: bool = False) -> Cloud:
     xyz = raw.xyz
     n = xyz.shape[0]
+    if n == 0 and allow_empty:
+        empty = np.zeros(0, np.int64)
+        return Cloud(np.zeros((0, 3)), dict(raw.fields), empty, 0, 0, path=name)
     if n == 0:
         raise CloudFormatError(f"{name}: no points")
     finite = np.isfinite(xyz).all(axis=1)
@@ -104,6 +114,7 @@ def _finish(raw: RawCloud, name: str) -> Cloud:
         height=raw.height,
         viewpoint=raw.viewpoint,
         path=name,
+        origin=raw.origin,
     )
 
 
@@ -186,6 +197,8 @@ _READERS: dict[str, Callable[[Path, str], RawCloud]] = {
     ".npy": _read_npy,
     ".npz": _read_npz,
     ".obj": _text.read_obj,
+    ".las": _las.read_las,
+    ".laz": _las.read_las,
 }
 
 # ------------------------------------------------------------------------------------- writing

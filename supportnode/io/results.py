@@ -50,7 +50,9 @@ def write_detection(
         write_ply(path, sel, colors=np.broadcast_to(colour, (len(sel), 3)).copy())
         written.append(path)
 
-    arrays = {"surface": per_input_row(detection.surfaces.labels, cloud)}
+    finite = np.zeros(cloud.input_count, dtype=bool)
+    finite[cloud.source_index] = True  # the rows the clouds above hold, in this order
+    arrays = {"surface": per_input_row(detection.surfaces.labels, cloud), "finite": finite}
     if detection.objects is not None:
         arrays["object"] = per_input_row(detection.objects.labels, cloud)
         obj_dir = out / f"{name}_objects"
@@ -75,6 +77,9 @@ def write_detection(
             "rows": int(cloud.input_count),
             "points": len(points),
             "dropped_nonfinite": int(cloud.dropped_nonfinite),
+            # metres subtracted from the file's coordinates (LAS/LAZ survey coordinates):
+            # add it to every position in this file to get the file's frame back
+            "origin": None if cloud.origin is None else [float(v) for v in cloud.origin],
         },
         "params": params_dict,
         **(extra or {}),

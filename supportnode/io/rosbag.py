@@ -52,6 +52,8 @@ DATATYPES: dict[int, tuple[str, str]] = {
 }
 #: Type names of PointCloud2 in ROS 2 (and rosbags) and ROS 1 spelling.
 POINTCLOUD2_TYPES = frozenset({"sensor_msgs/msg/PointCloud2", "sensor_msgs/PointCloud2"})
+TF_TYPES = frozenset({"tf2_msgs/msg/TFMessage", "tf2_msgs/TFMessage"})
+IMU_TYPES = frozenset({"sensor_msgs/msg/Imu", "sensor_msgs/Imu"})
 _MAX_COLUMNS = 64
 _NOT_IDENT = re.compile(r"[^A-Za-z0-9_]")
 INSTALL_HINT = "install the ROS extra: pip install 'supportnode[ros]' (or: pip install rosbags)"
@@ -171,11 +173,10 @@ def pointcloud2_to_cloud(
         if clean in ("rgb", "rgba") and code == "f4" and count == 1:
             col = col.view("<u4")  # PCL packs colour bits into a float: our convention is <u4
         cols[clean] = col
-    stamp = msg.header.stamp
     header_seq = getattr(msg.header, "seq", None)
     coords = {k: cols.pop(k) for k in ("x", "y", "z")}  # x, y, z first, as on the wire
     return PointCloud(
-        stamp=float(stamp.sec) + 1e-9 * float(stamp.nanosec),
+        stamp=_seconds(msg.header.stamp),
         frame_id=str(msg.header.frame_id),
         fields={**coords, **cols},
         seq=int(header_seq) if header_seq is not None else seq,
@@ -279,6 +280,46 @@ class RosBag:
             raise PointCloud2Error(f"PointCloud2 does not deserialise ({_one_line(err)})") from err
         return pointcloud2_to_cloud(msg, seq=seq, warnings=warnings)
 
+    def poser(self, fixed_frame: str | None, tolerance: float) -> Any:
+        """A `ScanPoser` from every tf and IMU message of the bag, or None when it has no tf."""
+        from supportnode.io.posing import ImuSample, ScanPoser
+        from supportnode.io.tf import TfBuffer
+
+        tf_topics = {t for t, (typ, _) in self.topics.items() if typ in TF_TYPES}
+        if not tf_topics:
+            return None
+        imu_topics = {t for t, (typ, _) in self.topics.items() if typ in IMU_TYPES}
+        tf, imu = TfBuffer(), []
+        for m in self.messages(tf_topics | imu_topics):
+            try:
+                msg: Any = self._reader.deserialize(m.rawdata, m.msgtype)
+            except Exception as err:
+                self.warnings.append(
+                    f"{self.path}: topic {m.topic!r}: skipped a message ({_one_line(err)})"
+                )
+                continue
+            if m.msgtype in IMU_TYPES:
+                a = msg.linear_acceleration
+                imu.append(
+                    ImuSample(
+                        _seconds(msg.header.stamp),
+                        str(msg.header.frame_id),
+                        np.array([a.x, a.y, a.z]),
+                    )
+                )
+                continue
+            for ts in msg.transforms:
+                t, q = ts.transform.translation, ts.transform.rotation
+                tf.add(
+                    str(ts.header.frame_id),
+                    str(ts.child_frame_id),
+                    _seconds(ts.header.stamp),
+                    np.array([t.x, t.y, t.z]),
+                    np.array([q.x, q.y, q.z, q.w]),
+                    static=m.topic.rstrip("/").endswith("tf_static"),
+                )
+        return ScanPoser(tf, fixed_frame, tolerance, imu)
+
     def close(self) -> None:
         """Close the bag (idempotent)."""
         if getattr(self._reader, "stack", None) is not None:
@@ -289,6 +330,11 @@ class RosBag:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _seconds(stamp: Any) -> float:
+    """A ROS time (sec, nanosec in ROS 2; sec, nsec in ROS 1 through rosbags: nanosec) in s."""
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
 
 
 def _one_line(err: BaseException) -> str:

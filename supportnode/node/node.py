@@ -33,9 +33,9 @@ pose: the cloud frame is the map frame, a static sensor). Results are published 
 rotated by the gravity correction (identity when the map frame is already z-up), named
 ``NodeParams.frame_id`` (the cloud's ``frame_id`` for scans without a pose).
 
-A surface is ``safe`` when all hold: footprint area >= 0.10 m^2, flatness (rms distance to its
-plane) <= 1 cm, normal within 5 deg of up, and seen in at least 2 detections in a row under
-the same id (one scan's glimpse is not enough to put something down on).
+A surface is ``safe`` by `supportnode.detection.policy.is_safe` (the ``safe`` section: area,
+flatness, tilt) once seen in ``node.safe_min_hits`` detections in a row under the same id (one
+scan's glimpse is not enough to put something down on).
 """
 
 from __future__ import annotations
@@ -55,10 +55,11 @@ import zmq
 
 from supportnode import bus
 from supportnode._closing import Closing
+from supportnode.detection.policy import is_safe
 from supportnode.errors import AlignmentError, InputError, ProtocolError, SupportNodeError
 from supportnode.geometry.gravity import estimate_gravity, rotation_to_z
 from supportnode.geometry.memo import Memo
-from supportnode.geometry.transform import transform_points
+from supportnode.geometry.transform import quaternion_matrix, transform_points
 from supportnode.msgs import (
     Diagnostics,
     Limits,
@@ -79,11 +80,6 @@ __all__ = ["MapLike", "Node", "NodeOutput", "quaternion_matrix"]
 
 log = logging.getLogger("supportnode.node")
 
-# Safety rule of a surface (see the module docstring).
-SAFE_MIN_AREA = 0.10  # m^2
-SAFE_MAX_FLATNESS = 0.01  # m
-SAFE_MAX_TILT_DEG = 5.0
-SAFE_MIN_HITS = 2
 # Horizontal planes less than this below the sensor, or above it, are ceilings and
 # undersides, not supports: the node publishes only surfaces lower than sensor z minus this, m.
 _UNDER_SENSOR_M = 0.05
@@ -172,18 +168,6 @@ class _Job:
     t_recv: float = 0.0  # perf_counter when it was received (threaded spin)
     t_ready: float = 0.0  # perf_counter when it was merged and handed to detection
     merge: int = 0  # number of its merge into the map (Node._merges after it)
-
-
-def quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of the unit quaternion ``q`` = (x, y, z, w)."""
-    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 class _Gravity:
@@ -637,7 +621,9 @@ class Node(Closing):
         t = time.perf_counter()
         tracks = self.surface_tracker.tracks
         safe = [
-            _is_safe(s, tracks.get(int(i), {}).get("hits", 0))
+            is_safe(
+                s, self.params.safe, tracks.get(int(i), {}).get("hits", 0), self.cfg.safe_min_hits
+            )
             for s, i in zip(keep, s_up.ids, strict=True)
         ]
         self._out_seq += 1
@@ -1132,16 +1118,6 @@ class Node(Closing):
             if s is not None:
                 s.close()
         self._sub = self._pub = None
-
-
-def _is_safe(s: Any, hits: int) -> bool:
-    tilt = math.degrees(math.acos(min(1.0, abs(float(s.normal[2])))))
-    return (
-        s.area >= SAFE_MIN_AREA
-        and s.flatness <= SAFE_MAX_FLATNESS
-        and tilt <= SAFE_MAX_TILT_DEG
-        and hits >= SAFE_MIN_HITS
-    )
 
 
 def _unsupported(c: Any) -> Any:

@@ -31,7 +31,9 @@ COLOR_MODES = ("class", "id")
 # The report's colours, slightly softened so labels stay readable on top of them.
 SURFACE_RGB = (0.90, 0.10, 0.10)
 OTHER_RGB = (0.15, 0.70, 0.15)
-GREY_RGB = (0.62, 0.62, 0.62)  # --color id: points on neither a surface nor an object
+GREY_RGB = (0.62, 0.62, 0.62)
+# Points beyond these percentiles (each end, each picture axis) do not set the picture's extent.
+_ROBUST_PERCENT = 2.0  # --color id: points on neither a surface nor an object
 OUTLINE_RGB = (0.0, 0.0, 0.0)
 BOX_RGB = (0.10, 0.25, 1.0)
 OFF_BOX_RGB = (0.35, 0.35, 0.35)  # objects standing on no surface (walls, clutter)
@@ -241,12 +243,8 @@ def draw_frame(
     ax = fig.add_axes(box)
     box_w, box_h = box[2] * w_px, box[3] * h_px
 
-    # Limits from every point (not only the drawn ones) and every shape, metres equal in x and y.
-    extent = [frame.points @ basis[:2].T] if n_all else []
-    extent += [_obb_corners(o) @ basis[:2].T for o in result["objects"]]
-    extent += [r @ basis[:2].T for s in result["surfaces"] for r in _rings3(s)]
-    allxy = np.vstack(extent) if extent else np.zeros((1, 2))
-    xlim, ylim = _fit_limits(allxy.min(axis=0), allxy.max(axis=0), box_w, box_h)
+    lo, hi = _extent(frame, basis)
+    xlim, ylim = _fit_limits(lo, hi, box_w, box_h)
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
     ax.set_aspect("equal", adjustable="datalim")  # equal by construction already; keep it so
@@ -283,6 +281,27 @@ def draw_frame(
     return fig, ax
 
 
+def _extent(frame: Frame, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Picture-plane box (lo, hi), metres: the central points (every point, not only the drawn
+    ones) and the surfaces found. Robust percentiles, so that a few far returns (a depth
+    camera's 10 m outliers) do not shrink the scene into a corner; they are drawn at the edge."""
+    parts = [r @ basis[:2].T for s in frame.result["surfaces"] for r in _rings3(s)]
+    if len(frame.points):
+        xy = frame.points @ basis[:2].T
+        lo, hi = np.percentile(xy, [_ROBUST_PERCENT, 100 - _ROBUST_PERCENT], axis=0)
+        margin = 0.1 * (hi - lo)  # the central points and a little more, within the data
+        lo, hi = np.maximum(lo - margin, xy.min(0)), np.minimum(hi + margin, xy.max(0))
+        parts.append(np.vstack([lo, hi]))
+    central = np.vstack(parts) if parts else np.zeros((1, 2))
+    lo, hi = central.min(axis=0), central.max(axis=0)
+    # objects inside that box count whole (a box is not cut at the edge), far ones do not
+    for o in frame.result["objects"]:
+        corners = _obb_corners(o) @ basis[:2].T
+        if np.all((corners.mean(0) >= lo) & (corners.mean(0) <= hi)):
+            lo, hi = np.minimum(lo, corners.min(0)), np.maximum(hi, corners.max(0))
+    return lo, hi
+
+
 def _rings3(s: dict) -> list[np.ndarray]:
     """A surface's outline rings, closed, as (K+1, 3) polylines at its height (outer first)."""
     h = float(s["height"])
@@ -315,6 +334,9 @@ def _draw_points(
     depth = pts @ basis[2]
     order = np.argsort(depth, kind="stable")
     xy = pts[order] @ basis[:2].T
+    # outliers beyond the limits (see _extent) are drawn on the edge, not lost
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    xy = np.c_[np.clip(xy[:, 0], x0, x1), np.clip(xy[:, 1], y0, y1)]
     rgb = colours[idx][order]
     if view != "top" and len(depth) > 1:
         # Side and oblique views have no occlusion worth the name with sparse points: fade far

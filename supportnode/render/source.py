@@ -101,7 +101,7 @@ def load_result_dir(result_dir: str | os.PathLike[str]) -> Frame:
     det, rest = _find_plys(d, name)
     notes: list[str] = []
     if det is not None and rest is not None:
-        a, b = read_cloud(det), read_cloud(rest)
+        a, b = read_cloud(det, allow_empty=True), read_cloud(rest, allow_empty=True)
         points = np.vstack([a.points, b.points])
         surface, obj = _labels_for_plys(labels, len(a), len(b), inp, notes)
         if surface is None:  # labels unusable: the PLY split still tells surface from rest
@@ -116,7 +116,7 @@ def _load_labels(path: Path) -> dict[str, np.ndarray] | None:
         return None
     try:
         with np.load(path, allow_pickle=False) as z:
-            return {k: np.asarray(z[k]) for k in ("surface", "object") if k in z.files}
+            return {k: np.asarray(z[k]) for k in ("surface", "object", "finite") if k in z.files}
     except (OSError, ValueError, EOFError) as err:
         raise SupportNodeError(f"{path}: cannot read ({' '.join(str(err).split())})") from err
 
@@ -159,8 +159,12 @@ def _labels_for_plys(
     if obj is None:
         return surface, None
     obj = obj.astype(np.int32, copy=False)
-    if len(surf) == n_det + n_rest and int(inp.get("dropped_nonfinite", 0) or 0) == 0:
-        return surface, np.r_[np.full(n_det, -1, np.int32), obj[~on]]
+    finite = labels.get("finite")  # which rows the clouds hold (written since NaN rows count)
+    if finite is None and len(surf) == n_det + n_rest:
+        finite = np.ones(len(surf), dtype=bool)
+    if finite is not None and int(finite.sum()) == n_det + n_rest:
+        kept_surf, kept_obj = surf[finite], obj[finite]
+        return surface, np.r_[np.full(n_det, -1, np.int32), kept_obj[kept_surf < 0]]
     notes.append("NaN rows dropped: object points not matched to ids")
     return surface, None
 

@@ -6,6 +6,8 @@ Each cloud draws its noise from its own seeded generator (`seed` for a sampled c
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from supportnode.errors import ConfigError
@@ -48,11 +50,13 @@ def scans(
     noise: NoiseSpec | None = None,
     frame: str = "world",
     organized: bool = False,
+    on_scan: Callable[[int], None] | None = None,
 ) -> list[SimCloud]:
     """One scan per pose ((F, 4, 4) sensor-to-world), stamps i / sensor.rate seconds.
 
     organized: a depth camera's scans keep a row per pixel (NaN where nothing returns). The
-    depth-camera noise (`kinect`) draws from its own stream, `(seed, frame index, 2)`."""
+    depth-camera noise (`kinect`) draws from its own stream, `(seed, frame index, 2)`.
+    on_scan: called with each scan's index once it is done (progress)."""
     noise = noise or NoiseSpec()
     if (noise.kinect > 0 or organized) and not isinstance(sensor, DepthCamera):
         raise ConfigError("kinect noise and organised clouds need the depth camera")
@@ -69,4 +73,6 @@ def scans(
                 if not organized:
                     cloud = cloud.select(np.isfinite(cloud.points[:, 0]))
         out.append(finish(cloud, scene, noise, np.random.default_rng([seed, i]), frame))
+        if on_scan is not None:
+            on_scan(i)
     return out

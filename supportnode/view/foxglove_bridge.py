@@ -65,6 +65,13 @@ from supportnode.msgs import (
     SupportSurface,
     SupportSurfaces,
 )
+from supportnode.view.style import (
+    DISC_COLOR,
+    LOOSE_OBSTACLE_COLOR,
+    OBSTACLE_COLOR,
+    SAFE_COLOR,
+    UNSAFE_COLOR,
+)
 
 __all__ = [
     "DIAGNOSTICS_SCHEMA",
@@ -81,12 +88,6 @@ __all__ = [
     "timestamp",
 ]
 
-# RGBA, 0..1. Safe surfaces green, the others orange (not red: unsafe is not an error).
-SAFE_COLOR = (0.20, 0.80, 0.25, 1.0)
-UNSAFE_COLOR = (1.00, 0.55, 0.00, 1.0)
-DISC_COLOR = (0.25, 0.55, 1.00, 0.35)
-OBSTACLE_COLOR = (0.90, 0.20, 0.20, 0.55)
-LOOSE_OBSTACLE_COLOR = (0.60, 0.60, 0.60, 0.45)  # on no surface
 TEXT_COLOR = (1.0, 1.0, 1.0, 1.0)
 LINE_PIXELS = 2.0  # outline thickness, screen pixels (scale invariant: readable at any zoom)
 FONT_PIXELS = 14.0

@@ -1,0 +1,131 @@
+"""What the commands print: progress while they work, tables when done.
+
+On a terminal a job over a second long shows a rich progress bar (what, how many, elapsed,
+ETA) on stderr; in logs and pipes it prints a plain line now and then instead (every 10 % or
+5 s), and ``quiet`` silences both. Tables are rich tables, plain columns without borders so
+that they read the same in a terminal, a log or ``grep``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+__all__ = ["Interrupted", "Progress", "print_table", "progress"]
+
+# Pipes and logs get wide tables rather than rich's 80 columns: nothing is cut.
+_PIPE_WIDTH = 160
+_PLAIN_EVERY_S = 5.0
+# Jobs shorter than this print no progress lines (they are done before anyone waits), s.
+_PLAIN_AFTER_S = 1.0
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a job, with what it leaves behind (``main`` prints it in one line)."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(detail)
+        self.detail = detail
+
+
+def stdout_console() -> Console:
+    return Console(width=None if sys.stdout.isatty() else _PIPE_WIDTH, highlight=False)
+
+
+def print_table(
+    columns: Sequence[str],
+    rows: Sequence[Sequence[Any]],
+    title: str | None = None,
+    left: int = 1,
+) -> None:
+    """Print a table on stdout: the first ``left`` columns left-aligned, the others right."""
+    table = Table(title=title, box=None, pad_edge=False, title_justify="left", show_edge=False)
+    for i, name in enumerate(columns):
+        table.add_column(name, justify="left" if i < left else "right", no_wrap=True)
+    for row in rows:
+        table.add_row(*(str(v) for v in row))
+    stdout_console().print(table)
+
+
+class Progress:
+    """Counts work done: ``advance(n)``, ``total`` may be None (unknown)."""
+
+    def __init__(self, what: str, total: float | None, unit: str, quiet: bool) -> None:
+        self.what, self.total, self.unit = what, total, unit
+        self.done = 0.0
+        self._t0 = time.monotonic()
+        self._last_line = self._t0
+        self._last_share = 0.0
+        self._bar: Any = None
+        self._task: Any = None
+        if quiet:
+            self._mode = "quiet"
+        elif sys.stderr.isatty():
+            self._mode = "bar"
+            self._start_bar()
+        else:
+            self._mode = "plain"
+
+    def _start_bar(self) -> None:
+        from rich import progress as rp
+
+        self._bar = rp.Progress(
+            rp.TextColumn("{task.description}"),
+            rp.BarColumn(),
+            rp.MofNCompleteColumn(),
+            rp.TextColumn(self.unit),
+            rp.TimeElapsedColumn(),
+            rp.TimeRemainingColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        )
+        self._bar.start()
+        self._task = self._bar.add_task(self.what, total=self.total)
+
+    def advance(self, n: float = 1.0, note: str | None = None) -> None:
+        self.done += n
+        if self._mode == "bar":
+            self._bar.update(self._task, advance=n, description=note or self.what)
+        elif self._mode == "plain":
+            self._plain(note)
+
+    def _plain(self, note: str | None) -> None:
+        now = time.monotonic()
+        share = self.done / self.total if self.total else 0.0
+        if now - self._t0 < _PLAIN_AFTER_S:
+            return
+        if now - self._last_line < _PLAIN_EVERY_S and share - self._last_share < 0.1:
+            return
+        self._last_line, self._last_share = now, share
+        elapsed = now - self._t0
+        of = f"/{self.total:.0f}" if self.total else ""
+        eta = f", about {elapsed / share - elapsed:.0f} s left" if 0 < share < 1 else ""
+        extra = f" ({note})" if note else ""
+        print(
+            f"{self.what}: {self.done:.0f}{of} {self.unit}, {elapsed:.0f} s{eta}{extra}",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
+
+
+@contextmanager
+def progress(
+    what: str, total: float | None = None, unit: str = "", quiet: bool = False
+) -> Iterator[Progress]:
+    """A `Progress` for a job; the bar is removed when the job ends (also on Ctrl-C)."""
+    p = Progress(what, total, unit, quiet)
+    try:
+        yield p
+    finally:
+        p.close()
