@@ -10,6 +10,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
 from supportnode.geometry.transform import transform_points
 from supportnode.params import DetectParams
 
+if TYPE_CHECKING:  # the estimator is imported only when alignment runs
+    from supportnode.geometry.gravity import GravityEstimate
+
 
 @dataclass
 class Detection:
@@ -38,7 +42,7 @@ class Detection:
     free_space: list[FreeSpace]
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     rotation: np.ndarray | None = None  # (3, 3) applied to the input, None when not aligned
-    gravity: object | None = None  # GravityEstimate when alignment ran
+    gravity: GravityEstimate | None = None  # when alignment ran
 
     def to_dict(self) -> dict:
         """JSON-ready summary (no per-point arrays)."""
@@ -59,7 +63,7 @@ class Detection:
         return out
 
 
-def _gravity_summary(g: object | None) -> dict:
+def _gravity_summary(g: GravityEstimate | None) -> dict:
     if g is None:
         return {}
     return {

@@ -117,8 +117,8 @@ def estimate_gravity(
         if sensor_origin is None
         else np.asarray(sensor_origin, dtype=np.float64).reshape(3)
     )
-    hint = np.asarray(params.up_hint, dtype=np.float64).reshape(3)
-    hint = hint / np.linalg.norm(hint) if np.linalg.norm(hint) > 0 else None
+    given = np.asarray(params.up_hint, dtype=np.float64).reshape(3)
+    hint = given / np.linalg.norm(given) if np.linalg.norm(given) > 0 else None
     voxel = float(params.voxel_size)
     counts, ds, covs = voxel_moments(pts, voxel)
     if ds.shape[0] < _K:
