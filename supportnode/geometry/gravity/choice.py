@@ -75,7 +75,8 @@ def choose_up(
             f"--set gravity.up_hint={fmt_vector(toward)} (its normal toward the sensor), "
             "else the up direction you know"
         )
-    others = f" over {len(fams) - 1} other plane families" if len(fams) > 1 else ""
+    k = len(fams) - 1
+    others = f"; chosen over {k} other plane famil{'y' if k == 1 else 'ies'}" if k else ""
     why = (
         f"{len(ev.planes)} parallel plane(s) of {fam.members.size} normals, {rests} points "
         f"resting on them, {ev.perp:.0%} of normals across them, sensor vote "
