@@ -210,8 +210,16 @@ class GravityParams:
     enabled: bool = param(False, "estimate the rotation to gravity from normals")
     up_hint: tuple[float, float, float] = param(
         (0.0, 0.0, 0.0),
-        "approximate up vector in the cloud frame; zeros: decide from the "
-        "scene (sensor above the floor)",
+        "approximate up vector in the cloud frame (the plane family nearest it is up, never "
+        "a refusal); zeros: decide from the scene",
+    )
+    hint_cone_deg: float = param(
+        60.0,
+        "up_hint: plane families within this angle of it compete (the nearest wins); none: "
+        "up is refined on the planar normals within it, or is the hint itself",
+        "deg",
+        min=1.0,
+        max=90.0,
     )
     voxel_size: float = param(0.05, "grid for the normals used by alignment", "m", min=1e-3)
     inlier_angle_deg: float = param(

@@ -10,6 +10,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
 from supportnode.geometry.transform import transform_points
 from supportnode.params import DetectParams
 
+if TYPE_CHECKING:  # the estimator is imported only when alignment runs
+    from supportnode.geometry.gravity import GravityEstimate
+
 
 @dataclass
 class Detection:
@@ -38,7 +42,7 @@ class Detection:
     free_space: list[FreeSpace]
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     rotation: np.ndarray | None = None  # (3, 3) applied to the input, None when not aligned
-    gravity: object | None = None  # GravityEstimate when alignment ran
+    gravity: GravityEstimate | None = None  # when alignment ran
 
     def to_dict(self) -> dict:
         """JSON-ready summary (no per-point arrays)."""
@@ -59,7 +63,7 @@ class Detection:
         return out
 
 
-def _gravity_summary(g: object | None) -> dict:
+def _gravity_summary(g: GravityEstimate | None) -> dict:
     if g is None:
         return {}
     return {
@@ -67,6 +71,8 @@ def _gravity_summary(g: object | None) -> dict:
         "tilt_deg": float(g.tilt_deg),
         "inliers": int(g.inliers),
         "residual_deg": float(g.residual_deg),
+        "reason": g.reason,
+        **({"warning": g.warning} if g.warning else {}),
     }
 
 
@@ -80,6 +86,7 @@ def detect(
     memo: Memo | None = None,
     on_surfaces: Callable[[SurfaceResult, list[FreeSpace], Segmentation], None] | None = None,
     free_below: float | None = None,
+    origin_assumed: bool = False,
 ) -> Detection:
     """Run the detection stages on (N, 3) float points, metres.
 
@@ -94,6 +101,9 @@ def detect(
     surfaces first; only when objects is true. free_below: free space only for the surfaces
     lower than this height, metres, in the output frame (a node publishes no surface at or
     above its sensor: the ceiling's free space would be work thrown away); None: all.
+    origin_assumed: sensor_origin is an assumption (the cloud is taken to be in its sensor's
+    frame), dropped when alignment finds it on the support plane itself (a world-frame cloud
+    with its origin on the floor): no sensor stands inside its floor.
     """
     params = params or DetectParams()
     if free_below is not None and math.isnan(free_below):
@@ -109,6 +119,8 @@ def detect(
         t = time.perf_counter()
         gravity = estimate_gravity(pts, params.gravity, sensor_origin=sensor_origin)
         rotation = gravity.rotation
+        if origin_assumed and not abs(gravity.sensor_height) > 2.0 * params.gravity.voxel_size:
+            sensor_origin = None
         pts = transform_points(pts, rotation)
         timings["gravity"] = time.perf_counter() - t
     t = time.perf_counter()

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
+import camera_views
 import numpy as np
 import pytest
 from conftest import box_points, plane_points
@@ -182,6 +184,10 @@ def test_align_refuses_a_cloud_without_horizontal_surfaces(tmp_path, rng, capsys
     )
     err = capsys.readouterr().err
     assert "horizontal surface" in err and len(err.strip().splitlines()) == 1
+    advised = _advice(err, r"--set gravity\.up_hint=\[[-0-9.,]+\]")  # followed: no refusal
+    args = ["detect", str(tmp_path / "ball.npy"), "--align", "--out", str(tmp_path / "o")]
+    assert main([*args, "--quiet", *advised]) == 0
+    assert "no plane family within 60 deg of up_hint" in capsys.readouterr().err
 
 
 def test_sensor_origin_drops_undersides_and_rejects_bad_values(table_cloud, tmp_path, capsys):
@@ -196,3 +202,75 @@ def test_sensor_origin_drops_undersides_and_rejects_bad_values(table_cloud, tmp_
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert "--sensor-origin" in err and "X,Y,Z" in err
+
+
+def _advice(text: str, pattern: str) -> list[str]:
+    """The command-line arguments a message advises (it must advise them)."""
+    match = re.search(pattern, text)
+    assert match, text
+    return match.group(0).split(" ")
+
+
+def test_align_puts_the_sensor_at_the_camera(tmp_path, capsys):
+    """A camera-frame cloud: --align takes the camera at the frame's origin, so the shelf board
+    it sees from below is no surface (main reported it 0.4 m above the camera);
+    --sensor-origin still overrides."""
+    cloud, _ = camera_views.room_with_shelf(5)
+    path = tmp_path / "cam.npy"
+    np.save(path, cloud)
+    out = tmp_path / "o"
+    args = ["detect", str(path), "--align", "--out", str(out), "--no-objects", "--quiet"]
+    assert main(args) == 0
+    surfaces = json.loads((out / "result.json").read_text())["surfaces"]
+    large = [s["height"] for s in surfaces if s["area"] > 0.3]  # not the far wall's noise
+    assert large == [pytest.approx(-1.4, abs=0.02), pytest.approx(-0.65, abs=0.02)]
+    assert max(s["height"] for s in surfaces) < 0.0
+    # Told the sensor was 3 m above the camera: the board is below it, a surface again.
+    assert main([*args, "--sensor-origin", "0,-3,0"]) == 0
+    heights = [s["height"] for s in json.loads((out / "result.json").read_text())["surfaces"]]
+    assert pytest.approx(0.4, abs=0.02) in heights
+
+
+def test_millimetre_cloud_is_flagged_and_units_mm_finds_the_table(table_cloud, tmp_path, capsys):
+    _, pts = table_cloud
+    path = tmp_path / "mm.ply"
+    write_ply(path, pts * 1000.0)
+    out = tmp_path / "o"
+    assert main(["detect", str(path), "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "looks like mm" in err and "no surface found" in err
+    assert json.loads((out / "result.json").read_text())["surfaces"] == []
+    advised = _advice(err, r"--units mm")
+    assert main(["detect", str(path), "--out", str(out), "--quiet", *advised]) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert [round(s["height"], 3) for s in result["surfaces"]] == [0.0, 0.75]
+    assert result["units"] == {"file": "mm", "metres_per_unit": 0.001}
+    assert capsys.readouterr().err == ""
+
+
+def test_no_surface_says_what_to_check_and_the_advice_works(tmp_path, capsys):
+    cloud, _ = camera_views.tabletop(6, 45.0)
+    path = tmp_path / "table.npy"
+    np.save(path, cloud)
+    out = tmp_path / "o"
+    assert main(["detect", str(path), "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "no surface found" in err and "units" in err and len(err.strip().splitlines()) == 1
+    advised = _advice(err, r"--align")
+    assert main(["detect", str(path), "--out", str(out), "--quiet", *advised]) == 0
+    surfaces = json.loads((out / "result.json").read_text())["surfaces"]
+    assert surfaces[0]["height"] == pytest.approx(-0.6, abs=0.01)
+    assert capsys.readouterr().err == ""
+
+
+def test_bare_wall_refusal_advises_a_hint_that_works(tmp_path, capsys):
+    cloud, _ = camera_views.wall(7)
+    path = tmp_path / "wall.npy"
+    np.save(path, cloud)
+    args = ["detect", str(path), "--align", "--out", str(tmp_path / "o"), "--quiet"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "only one bare plane" in err and len(err.strip().splitlines()) == 1
+    advised = _advice(err, r"--set gravity\.up_hint=\[[-0-9.,]+\]")
+    assert main([*args, *advised]) == 0
+    assert capsys.readouterr().err == ""

@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
-import glob
-import os
+import re
 
+import camera_views
 import numpy as np
 import pytest
 
 from supportnode.errors import AlignmentError
 from supportnode.geometry.gravity import apply_rotation, estimate_gravity, rotation_to_z
 from supportnode.params import GravityParams
-
-REAL_DIR = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "real_scans")
 
 
 def _box(rng: np.random.Generator, lo, hi, density: float, top_only: bool = False) -> np.ndarray:
@@ -117,17 +115,73 @@ def test_camera_frame_cloud_up_is_minus_y() -> None:
     assert angle_deg(est.up, true_up) < 1.0
 
 
-def test_up_hint_sets_sign_and_family() -> None:
+def test_up_hint_nearest_family_wins_and_sets_the_sign() -> None:
     rng = np.random.default_rng(3)
-    pts = room(rng, density=1000.0)
-    # Upside down and the sensor given below the floor: the hint still decides.
+    pts = room(rng, density=1000.0) - SENSOR
+    # Upside down: the hint fixes the sign; a wall's family is nearest a horizontal hint.
     est = estimate_gravity(-pts, GravityParams(up_hint=(0.0, 0.0, -1.0)))
     assert angle_deg(est.up, np.array([0, 0, -1.0])) < 1.0
-    with pytest.raises(AlignmentError, match="up_hint"):
-        estimate_gravity(
-            _box(rng, [0, 0, 0], [0.01, 3, 3], 3000.0, top_only=False),
-            GravityParams(up_hint=(0.0, 0.0, 1.0)),
-        )
+    assert est.warning is None and "up_hint" in est.reason
+    est = estimate_gravity(pts, GravityParams(up_hint=(1.0, 0.0, 0.2)))
+    assert angle_deg(est.up, np.array([1.0, 0, 0])) < 1.0  # the wall at x = 3 m
+
+
+def test_up_hint_never_refuses() -> None:
+    """Beyond the cone: refined on the planar normals near the hint, else the hint as is;
+    a warning line says which."""
+    rng = np.random.default_rng(4)
+    wall = np.column_stack(
+        [np.full(30000, 2.0), rng.uniform(-2, 2, 30000), rng.uniform(-1, 1.5, 30000)]
+    )
+    strip = plane_strip(rng)  # a floor patch too small to make a family of its own
+    est = estimate_gravity(np.vstack([wall, strip]), GravityParams(up_hint=(0.3, 0.0, 1.0)))
+    assert angle_deg(est.up, np.array([0, 0, 1.0])) < 1.0
+    assert "refined" in est.warning and "no plane family within 60 deg" in est.warning
+    est = estimate_gravity(wall, GravityParams(up_hint=(0.0, 0.0, 2.0)))
+    np.testing.assert_allclose(est.up, [0, 0, 1.0])
+    assert "used as is" in est.warning
+    sphere = rng.normal(size=(20000, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    est = estimate_gravity(sphere, GravityParams(up_hint=(0.0, 1.0, 0.0)))
+    assert angle_deg(est.up, np.array([0, 1.0, 0])) < 10.0 and est.warning
+    est = estimate_gravity(np.zeros((3, 3)), GravityParams(up_hint=(0.0, 1.0, 0.0)))
+    np.testing.assert_allclose(est.up, [0, 1.0, 0])
+    assert "1 voxels" in est.warning
+
+
+def plane_strip(rng: np.random.Generator) -> np.ndarray:
+    """A 1.0 x 0.4 m patch of floor 1.2 m below the origin: 2 % of a wall scan's voxels."""
+    return np.column_stack(
+        [rng.uniform(0.5, 1.5, 3000), rng.uniform(-0.2, 0.2, 3000), np.full(3000, -1.2)]
+    )
+
+
+@pytest.mark.parametrize("pitch", [30.0, 45.0, 60.0, 85.0])
+@pytest.mark.parametrize("yaw", [0.0, 50.0])
+def test_table_view_is_aligned(pitch: float, yaw: float) -> None:
+    """A depth camera looking down at a table with a stack of boxes and cans, nothing else in
+    view (like the mOSD scans). main refused 3 of these 8: "only one bare plane"."""
+    cloud, true_up = camera_views.tabletop(int(pitch + yaw), pitch, yaw)
+    est = estimate_gravity(cloud)
+    assert angle_deg(est.up, true_up) < 0.2
+    assert "resting on them" in est.reason
+    assert est.sensor_height == pytest.approx(0.6, abs=0.02)  # the camera above the table
+
+
+def _advised_hint(message: str) -> tuple[float, float, float]:
+    """The up_hint a refusal tells the user to pass (it must give one)."""
+    match = re.search(r"--set gravity\.up_hint=\[([-0-9.,]+)\]", message)
+    assert match, message
+    return tuple(float(v) for v in match.group(1).split(","))
+
+
+def test_bare_wall_refused_with_advice_that_works() -> None:
+    cloud, _ = camera_views.wall(2)
+    with pytest.raises(AlignmentError, match="only one bare plane") as err:
+        estimate_gravity(cloud)
+    hint = _advised_hint(str(err.value))  # its normal toward the camera: (0, 0, -1)
+    est = estimate_gravity(cloud, GravityParams(up_hint=hint))
+    assert angle_deg(est.up, np.array([0, 0, -1.0])) < 1.0 and est.warning is None
 
 
 @pytest.mark.parametrize("kind", ["sphere", "noise", "wall"])
@@ -177,17 +231,26 @@ def test_sim_scenes_tilted(tilt: tuple[float, float]) -> None:
 
 
 @pytest.mark.real
-@pytest.mark.skipif(not os.path.isdir(REAL_DIR), reason="../shared/real_scans absent")
-def test_real_camera_scans_up_is_near_minus_y() -> None:
-    clouds = pytest.importorskip("supportnode.io.clouds")
-    files = sorted(glob.glob(os.path.join(REAL_DIR, "*.pcd")))
-    if not files:
-        pytest.skip("no PCD files in real_scans")
-    for path in files:
-        if "sick" in path:
-            continue  # millimetres; looks steeply down, covered by the bench
-        pts = clouds.read_cloud(path).points.astype(np.float64)
-        est = estimate_gravity(pts, GravityParams(up_hint=(0.0, -1.0, 0.0)))
-        # camera held upright: up within 60 deg of -y, never pointing into the scene (+z)
-        assert est.up[1] < -0.5 and est.up[2] < 0.1, (path, est.up)
-        assert est.residual_deg < 8.0
+@pytest.mark.slow
+def test_real_scans_come_out_level(real_scans) -> None:
+    """Every real scan beside the repository, aligned as `detect --align` does (no hint, the
+    camera at the origin): its floor or table is found, level within 2 deg, below the camera;
+    office1 on its floor (main took a cabinet front for it), the TUM desk's floor and desk
+    both; the 45 mOSD tabletops never refused (main refused 6)."""
+    from real_levels import read_metres, scan_paths, supports
+
+    from supportnode.pipeline import detect
+
+    paths = scan_paths(real_scans)
+    assert len(paths) >= 45
+    for path in paths:
+        cloud = read_metres(path)
+        det = detect(cloud.points, align=True, objects=False, sensor_origin=np.zeros(3))
+        for s in supports(path, cloud, det):
+            assert s.surface >= 0 and s.tilt_deg < 2.0, (path.name, s)
+        assert all(s.height < 0 for s in det.surfaces.surfaces), path.name
+        # A hint 20 deg off (about the camera's x axis) picks the same plane family.
+        up = det.gravity.up
+        hint = np.cos(np.radians(20)) * up + np.sin(np.radians(20)) * np.cross([1.0, 0, 0], up)
+        hinted = estimate_gravity(cloud.points, GravityParams(up_hint=tuple(hint)))
+        assert angle_deg(hinted.up, up) < 0.5 and hinted.warning is None, path.name

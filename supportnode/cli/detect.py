@@ -6,13 +6,20 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
+import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from supportnode.cli._common import add_config_arguments, add_rerun_arguments, positive_seconds
 from supportnode.cli._console import Interrupted, print_table, progress
 from supportnode.cli._sequence import add_sequence_arguments, process_sequence
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from supportnode.io.clouds import Cloud
+    from supportnode.io.units import UnitsGuess
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,14 +39,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--sensor-origin",
         metavar="X,Y,Z",
         type=_xyz,
-        help="sensor position in the cloud's frame, metres: planes above it are undersides",
+        help="sensor position in the cloud's frame, metres: planes above it are undersides "
+        "(with --align default: the PCD viewpoint, else 0,0,0: the cloud is the sensor's)",
+    )
+    parser.add_argument(
+        "--units",
+        choices=("m", "cm", "mm"),
+        help="length unit of the clouds' points (default m; a cloud that looks like cm or mm "
+        "is flagged on stderr); outputs are in metres, poses stay metres",
     )
     parser.add_argument("--no-objects", action="store_true", help="surfaces only")
     parser.add_argument(
         "--render", action="store_true", help="also draw result.png (needs the viz extra)"
     )
     add_rerun_arguments(parser, "--view", "the result")
-    parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    parser.add_argument(
+        "--quiet", action="store_true", help="print nothing but errors and warnings"
+    )
     add_sequence_arguments(parser, "sequences (recordings, bags and folders)")
     parser.add_argument(
         "--duration", type=positive_seconds, metavar="S", help="read S seconds from --start"
@@ -73,16 +89,20 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) -> int:
     from supportnode.config import config_to_dict
-    from supportnode.io.clouds import read_cloud
     from supportnode.io.results import write_detection
+    from supportnode.io.units import UNITS
+    from supportnode.kernels import runtime
     from supportnode.pipeline import detect
 
     t0 = time.perf_counter()
     stages = 3 + bool(args.render)
     with progress(f"detect {args.cloud}", stages, "stages", args.quiet) as bar:
         bar.advance(0, "reading")
+        # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart,
+        # so that the stage timings are the work on this cloud.
+        kernels_time = runtime.warm()
         t = time.perf_counter()
-        cloud = read_cloud(args.cloud)
+        cloud, unit, guess = _read(args.cloud, args.units)
         read_time = time.perf_counter() - t
         bar.advance(1, f"detecting in {len(cloud.points):,} points")
         detection = detect(
@@ -90,14 +110,16 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
             params,
             align=args.align,
             objects=not args.no_objects,
-            sensor_origin=args.sensor_origin,
+            sensor_origin=_sensor_origin(args, cloud),
+            origin_assumed=args.sensor_origin is None,
         )
-        detection.timings = {"read": read_time, **detection.timings}
+        detection.timings = {"kernels": kernels_time, "read": read_time, **detection.timings}
         points = cloud.points if detection.rotation is None else cloud.points @ detection.rotation.T
         bar.advance(1, "writing")
         t = time.perf_counter()
+        extra = {"units": {"file": unit, "metres_per_unit": UNITS[unit]}}
         try:
-            write_detection(out_dir, name, cloud, points, detection, config_to_dict(params))
+            write_detection(out_dir, name, cloud, points, detection, config_to_dict(params), extra)
             if args.render:
                 from supportnode.render import render_result
 
@@ -107,11 +129,70 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
             raise Interrupted(f"while writing: partial output left in {out_dir}/") from err
         write_time = time.perf_counter() - t
         bar.advance(1)
+    if detection.gravity is not None and detection.gravity.warning:
+        print(f"supportnode detect: warning: {detection.gravity.warning}", file=sys.stderr)
+    if not detection.surfaces.surfaces:
+        print(_nothing_found(args, guess), file=sys.stderr)
     if not args.quiet:
         _summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0)
     if args.view or args.save:
         _rerun(args, params, points, detection)
     return 0
+
+
+def _read(path: str, unit: str | None) -> tuple[Cloud, str, UnitsGuess | None]:
+    """The cloud in metres, the unit it was read in, and the guess made when none was given
+    (said on stderr when it is not metres). A flagged cloud is still read as metres: a guess
+    must never stop a valid cloud, and the summary shows what came of it."""
+    import numpy as np
+
+    from supportnode.io.clouds import read_cloud
+    from supportnode.io.units import UNITS, guess_units
+
+    cloud = read_cloud(path)
+    if unit is None:
+        guess = guess_units(cloud.points)
+        message = guess.message(path)
+        if message:
+            print(f"supportnode detect: warning: {message}", file=sys.stderr)
+        return cloud, "m", guess
+    scale = UNITS[unit]
+    if scale != 1.0:
+        cloud.points = cloud.points * scale
+        if cloud.origin is not None:
+            cloud.origin = cloud.origin * scale
+        if cloud.viewpoint is not None:
+            cloud.viewpoint = np.concatenate([cloud.viewpoint[:3] * scale, cloud.viewpoint[3:]])
+    return cloud, unit, None
+
+
+def _sensor_origin(args: argparse.Namespace, cloud: Cloud) -> np.ndarray | None:
+    """Where the sensor was: --sensor-origin; with --align the cloud is in the sensor's own
+    frame, so the PCD viewpoint or the frame's origin; otherwise unknown (None)."""
+    import numpy as np
+
+    if args.sensor_origin is not None:
+        return np.asarray(args.sensor_origin, dtype=np.float64)
+    if not args.align:
+        return None
+    return np.zeros(3) if cloud.viewpoint is None else np.asarray(cloud.viewpoint[:3], float)
+
+
+def _nothing_found(args: argparse.Namespace, guess: UnitsGuess | None) -> str:
+    """What to check when no surface was found: one line, the likely causes first."""
+    checks = []
+    if guess is not None and guess.unit != "m":
+        checks.append(f"the units (it looks like {guess.unit}: --units {guess.unit})")
+    elif guess is not None:
+        checks.append("the units (read as metres; --units mm or --units cm)")
+    if not args.align:
+        checks.append("that z points up (a camera-frame cloud needs --align)")
+    else:
+        checks.append("the alignment (--set gravity.up_hint=[x,y,z] if the up found is wrong)")
+    checks.append("the surface limits (surfaces.min_area, surfaces.max_tilt_deg)")
+    return f"supportnode detect: warning: {args.cloud}: no surface found; check " + ", ".join(
+        checks
+    )
 
 
 def _rerun(args: argparse.Namespace, params: Any, points: Any, detection: Any) -> None:
@@ -160,7 +241,10 @@ def _summary(path, cloud, detection, out_dir, write_time: float, total: float) -
             "origin: " + ", ".join(f"{v:.3f}" for v in cloud.origin) + " subtracted (result.json)"
         )
     if detection.gravity is not None:
-        print(f"gravity: tilt {detection.gravity.tilt_deg:.2f} deg corrected")
+        print(
+            f"gravity: tilt {detection.gravity.tilt_deg:.2f} deg corrected "
+            f"({detection.gravity.reason})"
+        )
     free = {f.surface_id: f for f in detection.free_space}
     rows = []
     for s in detection.surfaces.surfaces:
@@ -211,18 +295,29 @@ def _run_sequence(args: argparse.Namespace, params: Any, out_dir: Path) -> int:
 
 def _detect_scan(scan: Any, params: Any, args: argparse.Namespace, results: Any) -> tuple:
     """One scan of a sequence, in its pose's frame when it has one (the map frame)."""
+    import numpy as np
+
     from supportnode.detection.messages import detection_messages
     from supportnode.geometry.transform import pose_matrix, transform_points
+    from supportnode.io.units import UNITS
     from supportnode.pipeline import detect
 
     t = time.perf_counter()
-    points, origin, frame = scan.points, None, scan.frame_id
+    points, frame = scan.points * UNITS[args.units or "m"], scan.frame_id
+    # Without a pose a scan is in its sensor's frame: the sensor at its origin (an assumption
+    # `detect` drops when alignment finds that origin on the floor).
+    origin = np.zeros(3) if args.align else None
     if scan.pose is not None:
         pose = pose_matrix(scan.pose.translation, scan.pose.rotation)
         points = transform_points(points, pose[:3, :3], pose[:3, 3])
         origin, frame = pose[:3, 3], params.node.frame_id
     det = detect(
-        points, params, align=args.align, objects=not args.no_objects, sensor_origin=origin
+        points,
+        params,
+        align=args.align,
+        objects=not args.no_objects,
+        sensor_origin=origin,
+        origin_assumed=scan.pose is None,
     )
     surfaces, obstacles = detection_messages(det, params.safe, scan.stamp, frame, scan.seq)
     results.write(scan, surfaces, obstacles, det.timings)
