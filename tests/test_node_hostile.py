@@ -179,6 +179,7 @@ def test_a_bad_message_never_pushes_a_good_scan_out_of_the_queue(reason):
             d.good(stamp)
             d.send(BAD_MESSAGES[reason](d.points))
             assert d.result(stamp) is not None, f"round {k}: the good scan lost its place"
+        assert d.good_result(9.5) is not None  # after the last bad message: it was counted
         diag = d.fresh_diagnostics()
         assert diag.counters[f"rejected_{reason}"] == 3
         assert diag.counters["time_jumps"] == 0
@@ -195,6 +196,7 @@ def test_stamp_jumps_are_rejected_unless_the_source_really_restarted():
         for i in range(4):  # then alternating: two clocks on one topic
             assert d.good_result(10.1 + 0.1 * i) is not None
             d.good(1e9 + 0.1 * (i + 1) + 100.0 * i)
+        assert d.good_result(10.45) is not None  # after the last far one: it was counted
         diag = d.fresh_diagnostics()
         assert diag.counters["time_jumps"] == 0  # no reset
         assert diag.counters["rejected_stamp_jump"] == 5
