@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from supportnode.detection.messages import obstacles_message, surfaces_message
 from supportnode.errors import ProtocolError
 from supportnode.geometry.freespace import FreeSpace
 from supportnode.geometry.objects import Cluster
@@ -116,11 +117,11 @@ def make_cluster(cid=0, surface_id=0) -> Cluster:
 
 def all_examples() -> dict[str, list]:
     """One valid encoded message of every type (frames as received)."""
-    surfaces = SupportSurfaces.from_detection(
+    surfaces = surfaces_message(
         [make_surface(0), make_surface(1, 0.0)], [make_free(0)], 3.0, "map", 4
     )
     rng = np.random.default_rng(3)
-    clusters = ObstacleClusters.from_detection(
+    clusters = obstacles_message(
         [make_cluster(0), make_cluster(1, None)], 3.0, "map", 4, points=[rng.random((5, 3))] * 2
     )
     diag = Diagnostics(
@@ -254,10 +255,10 @@ def test_nan_in_other_fields_is_kept():
 # ---------------------------------------------------------------- results round trips
 
 
-def test_support_surfaces_round_trip_from_detection():
+def test_support_surfaces_round_trip_from_geometry():
     surfaces = [make_surface(0, holes=2), make_surface(1, 0.0, holes=0), make_surface(2, 1.1)]
     free = [make_free(0), make_free(2, radius=0.0)]  # surface 1 has no free space computed
-    msg = SupportSurfaces.from_detection(
+    msg = surfaces_message(
         surfaces, free, 5.5, "map", 8, ids=[10, 11, 12], safe=[True, False, True]
     )
     frames = msg.encode("surfaces")
@@ -292,11 +293,11 @@ def test_support_surfaces_empty_and_float32_outline():
     np.testing.assert_array_equal(out.surfaces[0].outline[0], ring)
 
 
-def test_obstacle_clusters_round_trip_from_detection():
+def test_obstacle_clusters_round_trip_from_geometry():
     rng = np.random.default_rng(5)
     pts = [rng.random((50, 3)), rng.random((3, 3))]
     clusters = [make_cluster(0, 0), make_cluster(1, None)]
-    msg = ObstacleClusters.from_detection(
+    msg = obstacles_message(
         clusters,
         2.0,
         "map",
@@ -324,8 +325,20 @@ def test_obstacle_clusters_round_trip_from_detection():
     np.testing.assert_array_equal(out.clusters[1].points, pts[1].astype(np.float32))
 
 
+def test_old_from_detection_names_give_the_same_frames():
+    # The node's call sites (SupportSurfaces/ObstacleClusters.from_detection) keep working.
+    s, free = [make_surface(0), make_surface(1)], [make_free(1)]
+    new = surfaces_message(s, free, 1.0, "map", 2, ids=[9, 8], safe=[True, False])
+    old = SupportSurfaces.from_detection(s, free, 1.0, "map", 2, ids=[9, 8], safe=[True, False])
+    assert [bytes(f) for f in new.encode("s")] == [bytes(f) for f in old.encode("s")]
+    c = [make_cluster(0, 1), make_cluster(1, None)]
+    new = obstacles_message(c, 1.0, "map", surface_ids={1: 8})
+    old = ObstacleClusters.from_detection(c, 1.0, "map", surface_ids={1: 8})
+    assert [bytes(f) for f in new.encode("o")] == [bytes(f) for f in old.encode("o")]
+
+
 def test_obstacle_clusters_without_points_and_empty():
-    frames = ObstacleClusters.from_detection([make_cluster()], 1.0, "map").encode("o")
+    frames = obstacles_message([make_cluster()], 1.0, "map").encode("o")
     names = [b["name"] for b in header_of(frames)["buffers"]]
     assert "points" not in names and "point_offsets" not in names
     out = decode_any(wire(frames))
