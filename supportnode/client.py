@@ -28,7 +28,7 @@ import zmq
 
 from supportnode import bus
 from supportnode._closing import Closing
-from supportnode.errors import InputError, ProtocolError
+from supportnode.errors import ProtocolError
 from supportnode.msgs import (
     Diagnostics,
     Limits,
@@ -218,31 +218,6 @@ class Publisher(Closing):
 
 
 def pose_from_matrix(matrix: Any) -> Pose:
-    """`Pose` from a 4x4 homogeneous transform (rotation part orthonormal, last row 0 0 0 1)."""
-    m = np.asarray(matrix, dtype=np.float64)
-    if m.shape != (4, 4) or not np.isfinite(m).all():
-        raise InputError(f"pose must be a finite 4x4 matrix, got shape {m.shape}")
-    r = m[:3, :3]
-    if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
-        raise InputError("pose: the 3x3 rotation part is not a rotation")
-    return Pose(m[:3, 3].copy(), _quaternion_xyzw(r))
-
-
-def _quaternion_xyzw(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w) of rotation matrix ``r`` (Shepperd's method: the largest
-    diagonal term is divided by, so it is accurate for every angle)."""
-    trace = np.trace(r)
-    if trace > max(r[0, 0], r[1, 1], r[2, 2]):
-        s = 2.0 * np.sqrt(1.0 + trace)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, s / 4]
-    elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = [s / 4, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
-    elif r[1, 1] >= r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        q = [(r[0, 1] + r[1, 0]) / s, s / 4, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s]
-    out = np.asarray(q, dtype=np.float64)
-    return out / np.linalg.norm(out)
+    """`Pose` from a 4x4 homogeneous transform (rotation part orthonormal, last row 0 0 0 1);
+    `InputError` otherwise. The same as `Pose.from_matrix`."""
+    return Pose.from_matrix(matrix)

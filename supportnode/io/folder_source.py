@@ -12,7 +12,7 @@ import numpy as np
 from supportnode.errors import CloudFormatError, SupportNodeError
 from supportnode.io.clouds import READ_EXTENSIONS
 from supportnode.io.source_base import Source, SourceMessage
-from supportnode.msgs import PointCloud
+from supportnode.msgs import PointCloud, Pose
 
 __all__ = ["CLOUD_EXTENSIONS", "FolderSource"]
 
@@ -128,8 +128,6 @@ class FolderSource(Source):
         )
 
     def _sim_frame(self, p: Path, t: float, seq: int) -> PointCloud:
-        from supportnode.client import pose_from_matrix
-
         try:
             with np.load(p) as z:
                 points = np.asarray(z["points"], dtype=np.float64)
@@ -149,5 +147,5 @@ class FolderSource(Source):
             stamp=t,
             frame_id="lidar",
             seq=seq,
-            pose=pose_from_matrix(pose) if posed else None,
+            pose=Pose.from_matrix(pose) if posed else None,
         )

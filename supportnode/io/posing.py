@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from supportnode.io.tf import TfBuffer, TfError
-from supportnode.msgs import PointCloud
+from supportnode.msgs import PointCloud, Pose
 
 __all__ = ["ImuSample", "ScanPoser"]
 
@@ -46,11 +46,9 @@ class ScanPoser:
 
     def apply(self, cloud: PointCloud) -> PointCloud:
         """``cloud`` with ``pose`` (and ``gravity`` when an IMU says it); raises TfError."""
-        from supportnode.client import pose_from_matrix
-
         fixed = self.fixed_frame or self.tf.root(cloud.frame_id)
         pose = self.tf.lookup(fixed, cloud.frame_id, cloud.stamp, self.tolerance)
-        return dataclasses.replace(cloud, pose=pose_from_matrix(pose), gravity=self._gravity(cloud))
+        return dataclasses.replace(cloud, pose=Pose.from_matrix(pose), gravity=self._gravity(cloud))
 
     def _gravity(self, cloud: PointCloud) -> np.ndarray | None:
         """The pull direction in the cloud frame, or None (no IMU near the stamp, moving)."""

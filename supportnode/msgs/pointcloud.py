@@ -8,6 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from supportnode.errors import InputError
+from supportnode.geometry.transform import is_rotation, pose_matrix, quaternion_from_matrix
 from supportnode.msgs._wire import (
     FLOAT_DTYPES,
     Check,
@@ -40,6 +41,21 @@ class Pose:
     def __post_init__(self) -> None:
         self.translation = np.asarray(self.translation, dtype=np.float64).reshape(3)
         self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(4)
+
+    @classmethod
+    def from_matrix(cls, matrix: Any) -> Pose:
+        """Pose of a (4, 4) homogeneous transform (rotation part orthonormal); `InputError`
+        when it is not one."""
+        m = np.asarray(matrix, dtype=np.float64)
+        if m.shape != (4, 4) or not np.isfinite(m).all():
+            raise InputError(f"pose must be a finite 4x4 matrix, got shape {m.shape}")
+        if not is_rotation(m[:3, :3]):
+            raise InputError("pose: the 3x3 rotation part is not a rotation")
+        return cls(m[:3, 3].copy(), quaternion_from_matrix(m[:3, :3]))
+
+    def matrix(self) -> np.ndarray:
+        """(4, 4) float64 homogeneous transform cloud frame -> map frame."""
+        return pose_matrix(self.translation, self.rotation)
 
 
 @dataclass(eq=False)

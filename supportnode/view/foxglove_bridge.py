@@ -56,6 +56,7 @@ from foxglove.messages import (
 )
 from foxglove.messages import PointCloud as FoxPointCloud
 
+from supportnode.geometry.transform import quaternion_from_yaw
 from supportnode.msgs import (
     Diagnostics,
     Message,
@@ -149,12 +150,6 @@ def timestamp(stamp: float) -> Timestamp:
     sec = max(0.0, float(stamp))
     whole = math.floor(sec)
     return Timestamp(int(whole), min(999_999_999, round((sec - whole) * 1e9)))
-
-
-def quaternion_from_yaw(yaw: float) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of a rotation by ``yaw`` radians about +z."""
-    half = 0.5 * float(yaw)
-    return (0.0, 0.0, math.sin(half), math.cos(half))
 
 
 def _color(rgba: Sequence[float]) -> Color:

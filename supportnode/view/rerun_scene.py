@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from supportnode._closing import Closing
+from supportnode.geometry.transform import quaternion_from_yaw
 from supportnode.msgs import ObstacleClusters, PointCloud, SupportSurfaces
 from supportnode.view import ViewError
 from supportnode.view.style import (
@@ -92,11 +93,11 @@ class RerunScene(Closing):
 
     def log_scan(self, scan: PointCloud) -> None:
         """A scan, moved into the world frame by its pose when it has one."""
-        from supportnode.geometry.transform import pose_matrix, transform_points
+        from supportnode.geometry.transform import transform_points
 
         points = scan.points
         if scan.pose is not None:
-            m = pose_matrix(scan.pose.translation, scan.pose.rotation)
+            m = scan.pose.matrix()
             points = transform_points(points, m[:3, :3], m[:3, 3])
         self.log_points(scan.stamp, points)
 
@@ -142,7 +143,7 @@ class RerunScene(Closing):
                 rr.Boxes3D(
                     centers=[c.obb_center],
                     half_sizes=[np.asarray(c.obb_size) / 2],
-                    quaternions=[rr.Quaternion(xyzw=[0, 0, math.sin(yaw / 2), math.cos(yaw / 2)])],
+                    quaternions=[rr.Quaternion(xyzw=quaternion_from_yaw(yaw))],
                     colors=_rgba(OBSTACLE_COLOR if on else LOOSE_OBSTACLE_COLOR),
                     labels=[f"#{c.id}"],
                 ),
