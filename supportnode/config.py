@@ -36,6 +36,7 @@ import yaml
 
 from supportnode.errors import ConfigError
 from supportnode.params import DetectParams
+from supportnode.yamlnodes import Constructor, compose, line_of, read_text, short_tag
 
 __all__ = [
     "config_to_dict",
@@ -160,8 +161,8 @@ class _Source:
 
     def fail(self, node: yaml.Node | None, message: str) -> ConfigError:
         """A ConfigError prefixed with this source (and the node's line for files)."""
-        if self.is_file and node is not None and node.start_mark is not None:
-            return ConfigError(f"{self.label}:{node.start_mark.line + 1}: {message}")
+        if self.is_file and line_of(node):
+            return ConfigError(f"{self.label}:{line_of(node)}: {message}")
         return ConfigError(f"{self.label}: {message}")
 
 
@@ -170,11 +171,11 @@ class _Checker:
 
     def __init__(self, source: _Source) -> None:
         self.source = source
-        self._loader = yaml.SafeLoader("")
+        self._values = Constructor()
 
     def close(self) -> None:
         """Release the PyYAML constructor."""
-        self._loader.dispose()
+        self._values.close()
 
     def construct(self, node: yaml.Node, path: str) -> Any:
         """The plain Python value of a node (as ``yaml.safe_load`` would give it).
@@ -182,19 +183,13 @@ class _Checker:
         Tags the safe loader cannot build (``!!python/...``, ``!foo``, ``!!int abc``) raise a
         ConfigError naming ``path``.
         """
-        try:
-            return self._loader.construct_object(node, deep=True)
-        except Exception as err:  # PyYAML's constructors raise many kinds on bad tagged text
-            if isinstance(err, yaml.constructor.ConstructorError):
-                problem = "tag not supported"
-            elif isinstance(err, ValueError):
-                problem = str(err)
-            else:
-                problem = "not a valid value for this tag"
-            where = f"{path}: " if path else ""
-            raise self.source.fail(
-                node, f"{where}cannot read {node.value!r} tagged {_short_tag(node.tag)} ({problem})"
-            ) from err
+        where = f"{path}: " if path else ""
+
+        def fail(n: yaml.Node, problem: str) -> ConfigError:
+            shown = f"cannot read {n.value!r} tagged {short_tag(n.tag)} ({problem})"
+            return self.source.fail(n, where + shown)
+
+        return self._values.checked(node, fail)
 
     def section(self, schema: _Section, node: yaml.Node, path: str) -> dict[str, Any]:
         """Check a mapping node as section ``schema`` at dotted ``path`` ("" for the root)."""
@@ -320,7 +315,7 @@ class _Checker:
         if node.tag == "tag:yaml.org,2002:timestamp":
             return f"{node.value} (a date)"
         if node.tag not in _PLAIN_TAGS:
-            tagged = f" tagged {_short_tag(node.tag)}"
+            tagged = f" tagged {short_tag(node.tag)}"
         if isinstance(node, yaml.MappingNode):
             return f"a mapping{tagged}"
         if isinstance(node, yaml.SequenceNode):
@@ -337,11 +332,6 @@ class _Checker:
 
 
 _NOT_SCALAR = object()
-
-
-def _short_tag(tag: str) -> str:
-    """A tag as written in YAML: ``tag:yaml.org,2002:int`` -> ``!!int``."""
-    return "!!" + tag.removeprefix("tag:yaml.org,2002:") if tag.startswith("tag:yaml.org") else tag
 
 
 # --------------------------------------------------------------------------------------------
@@ -418,27 +408,7 @@ def load_config(
 def _load_file(schema: _Section, path: str) -> dict[str, Any]:
     """Read, compose and check one YAML file; returns its checked values as nested dicts."""
     source = _Source(path, is_file=True)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read()
-    except FileNotFoundError as err:
-        raise ConfigError(f"{path}: no such file") from err
-    except IsADirectoryError as err:
-        raise ConfigError(f"{path}: is a directory, not a YAML file") from err
-    except UnicodeDecodeError as err:
-        raise ConfigError(f"{path}: not UTF-8 text ({err.reason} at byte {err.start})") from err
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read ({err.strerror})") from err
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as err:
-        mark = err.problem_mark or err.context_mark
-        where = f"{path}:{mark.line + 1}" if mark is not None else path
-        problem = ", ".join(p for p in (err.context, err.problem) if p)
-        raise ConfigError(f"{where}: YAML syntax error: {problem}") from err
-    except yaml.YAMLError as err:
-        first = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ConfigError(f"{path}: YAML error: {first}") from err
+    node = compose(read_text(path, ConfigError), path, ConfigError)
     if node is None or (isinstance(node, yaml.ScalarNode) and node.tag == _NULL_TAG):
         return {}  # empty file (or only comments): all defaults
     checker = _Checker(source)

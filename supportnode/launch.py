@@ -45,6 +45,17 @@ from typing import IO, Any, TextIO
 import yaml
 
 from supportnode.errors import ConfigError, SupportNodeError
+from supportnode.yamlnodes import (
+    BOOL_TAG,
+    FLOAT_TAG,
+    INT_TAG,
+    STR_TAG,
+    Constructor,
+    compose,
+    describe,
+    line_of,
+    read_text,
+)
 
 __all__ = ["LaunchFile", "Launcher", "ProcessSpec", "load_launch", "resolve_command"]
 
@@ -62,12 +73,7 @@ _KEYS = (
 )
 # Longest the supervisor sleeps between looks at signals (see _supervise), s.
 _WAKE_S = 0.25
-_STR = "tag:yaml.org,2002:str"
-_BOOL = "tag:yaml.org,2002:bool"
-_INT = "tag:yaml.org,2002:int"
-_FLOAT = "tag:yaml.org,2002:float"
-_NULL = "tag:yaml.org,2002:null"
-_SCALAR_TAGS = (_STR, _BOOL, _INT, _FLOAT)
+_SCALAR_TAGS = (STR_TAG, BOOL_TAG, INT_TAG, FLOAT_TAG)
 
 
 @dataclass(frozen=True)
@@ -128,26 +134,12 @@ def resolve_command(command: Sequence[str]) -> tuple[list[str], bool]:
 def load_launch(path: str | os.PathLike[str]) -> LaunchFile:
     """Read and check a launch file; raises `ConfigError` with ``file:line`` on any problem."""
     label = os.fspath(path)
-    try:
-        text = Path(label).read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise ConfigError(f"{label}: no such file") from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{label}: cannot read ({err})") from err
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as err:
-        mark = err.problem_mark or err.context_mark
-        where = f"{label}:{mark.line + 1}" if mark is not None else label
-        problem = ", ".join(p for p in (err.context, err.problem) if p)
-        raise ConfigError(f"{where}: YAML syntax error: {problem}") from err
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{label}: YAML error: {err}") from err
+    root = compose(read_text(label, ConfigError), label, ConfigError)
     parser = _Parser(label, Path(label).resolve().parent)
     if root is None:
         raise ConfigError(f"{label}: empty launch file (expected a list of processes)")
     if not isinstance(root, yaml.SequenceNode):
-        raise parser.fail(root, f"expected a list of processes, got {_describe(root)}")
+        raise parser.fail(root, f"expected a list of processes, got {describe(root)}")
     specs: list[ProcessSpec] = []
     seen: dict[str, str] = {}
     for item in root.value:
@@ -163,31 +155,20 @@ def load_launch(path: str | os.PathLike[str]) -> LaunchFile:
     return LaunchFile(path=label, processes=tuple(specs))
 
 
-def _describe(node: yaml.Node) -> str:
-    if isinstance(node, yaml.MappingNode):
-        return "a mapping"
-    if isinstance(node, yaml.SequenceNode):
-        return f"a list of {len(node.value)} items"
-    if node.tag == _NULL:
-        return "nothing (null)"
-    return repr(node.value) if node.tag == _STR else str(node.value)
-
-
 class _Parser:
     """Checks composed YAML nodes of one launch file."""
 
     def __init__(self, label: str, folder: Path) -> None:
         self.label = label
         self.folder = folder
-        self._loader = yaml.SafeLoader("")
+        self._values = Constructor()
 
     def fail(self, node: yaml.Node, message: str) -> ConfigError:
-        line = node.start_mark.line + 1 if node.start_mark is not None else 0
-        return ConfigError(f"{self.label}:{line}: {message}")
+        return ConfigError(f"{self.label}:{line_of(node)}: {message}")
 
     def process(self, node: yaml.Node) -> ProcessSpec:
         if not isinstance(node, yaml.MappingNode):
-            raise self.fail(node, f"expected a process (a mapping of keys), got {_describe(node)}")
+            raise self.fail(node, f"expected a process (a mapping of keys), got {describe(node)}")
         values: dict[str, tuple[yaml.Node, yaml.Node]] = {}
         for key_node, value_node in node.value:
             key = str(key_node.value) if isinstance(key_node, yaml.ScalarNode) else "?"
@@ -243,27 +224,27 @@ class _Parser:
         )
 
     def value(self, node: yaml.ScalarNode) -> Any:
-        return self._loader.construct_object(node, deep=True)
+        return self._values.value(node)
 
     def text(self, node: yaml.Node, key: str) -> str:
-        if not isinstance(node, yaml.ScalarNode) or node.tag != _STR:
-            raise self.fail(node, f"{key}: expected a string, got {_describe(node)}")
+        if not isinstance(node, yaml.ScalarNode) or node.tag != STR_TAG:
+            raise self.fail(node, f"{key}: expected a string, got {describe(node)}")
         return str(node.value)
 
     def words(self, node: yaml.Node, key: str) -> list[str]:
         """A list of scalars, each taken as written (``0.10`` stays ``0.10``)."""
         if not isinstance(node, yaml.SequenceNode):
-            raise self.fail(node, f"{key}: expected a list, got {_describe(node)}")
+            raise self.fail(node, f"{key}: expected a list, got {describe(node)}")
         out = []
         for item in node.value:
             if not isinstance(item, yaml.ScalarNode) or item.tag not in _SCALAR_TAGS:
-                raise self.fail(item, f"{key}: expected strings or numbers, got {_describe(item)}")
+                raise self.fail(item, f"{key}: expected strings or numbers, got {describe(item)}")
             out.append(str(item.value))
         return out
 
     def env(self, node: yaml.Node) -> dict[str, str]:
         if not isinstance(node, yaml.MappingNode):
-            raise self.fail(node, f"env: expected a mapping NAME: value, got {_describe(node)}")
+            raise self.fail(node, f"env: expected a mapping NAME: value, got {describe(node)}")
         out: dict[str, str] = {}
         for key_node, value_node in node.value:
             name = str(key_node.value) if isinstance(key_node, yaml.ScalarNode) else ""
@@ -275,13 +256,13 @@ class _Parser:
         return out
 
     def boolean(self, node: yaml.Node, key: str) -> bool:
-        if not isinstance(node, yaml.ScalarNode) or node.tag != _BOOL:
-            raise self.fail(node, f"{key}: expected true or false, got {_describe(node)}")
+        if not isinstance(node, yaml.ScalarNode) or node.tag != BOOL_TAG:
+            raise self.fail(node, f"{key}: expected true or false, got {describe(node)}")
         return bool(self.value(node))
 
     def seconds(self, node: yaml.Node, key: str) -> float:
-        if not isinstance(node, yaml.ScalarNode) or node.tag not in (_INT, _FLOAT):
-            raise self.fail(node, f"{key}: expected a number of seconds, got {_describe(node)}")
+        if not isinstance(node, yaml.ScalarNode) or node.tag not in (INT_TAG, FLOAT_TAG):
+            raise self.fail(node, f"{key}: expected a number of seconds, got {describe(node)}")
         value = float(self.value(node))
         if not (0.0 <= value < float("inf")):
             raise self.fail(node, f"{key}: expected a finite number >= 0 s, got {node.value}")

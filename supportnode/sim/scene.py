@@ -38,12 +38,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from supportnode.errors import SceneError
 from supportnode.sim.primitives import KINDS, Bowl, Box, Cone, Cup, Cylinder, Shape, Sphere, Torus
 from supportnode.sim.scene_model import Primitive, Scene, pose_matrix, rpy_matrix
-from supportnode.sim.scene_yaml import LineLoader, LineMap, LineSeq
+from supportnode.yamlnodes import LineMap, LineSeq, compose, line_tree, read_text
 
 __all__ = [
     "Primitive",
@@ -314,15 +313,7 @@ def _parse_trajectory(p: _Parser, doc: Any) -> dict[str, Any]:
 def parse_scene(text: str, source: str = "<string>", name: str = "scene") -> Scene:
     """A `Scene` from YAML text; `source` names the file in error messages."""
     parser = _Parser(source)
-    try:
-        doc = yaml.load(text, Loader=LineLoader)  # safe: LineLoader derives from SafeLoader
-    except SceneError as err:  # duplicate key raised from inside the loader
-        raise SceneError(str(err).replace("{file}", source)) from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else 0
-        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        raise SceneError(f"{source}:{line}: invalid YAML: {problem}") from err
+    doc = line_tree(compose(text, source, SceneError), source, SceneError)
     parser.parse(doc)
     return Scene(
         name=str(doc.get("name", name)),
@@ -357,8 +348,4 @@ def scene_path(name_or_path: str | Path) -> Path:
 def load_scene(name_or_path: str | Path) -> Scene:
     """Load a bundled scene by name or a scene YAML file by path."""
     path = scene_path(name_or_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise SceneError(f"{path.name}: cannot read scene: {err}") from err
-    return parse_scene(text, source=path.name, name=path.stem)
+    return parse_scene(read_text(path, SceneError), source=path.name, name=path.stem)
