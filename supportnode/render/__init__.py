@@ -3,7 +3,9 @@
 Three layers, so other sources (a recording, the node) can reuse the drawing:
 - :mod:`supportnode.render.source`: a :class:`Frame` (points, labels, parsed result.json) from a
   detect output folder;
-- :mod:`supportnode.render.draw`: :func:`draw_frame`, a Frame -> (Figure, Axes), no files;
+- :mod:`supportnode.render.draw`: :func:`draw_frame`, a Frame -> (Figure, Axes), no files
+  (its parts: :mod:`~supportnode.render.projection`, the views' geometry, and
+  :mod:`~supportnode.render.layers`, what is drawn on the axes);
 - here: :func:`render_frame` and :func:`render_result`, which write PNGs.
 
 matplotlib is an optional extra (``supportnode[viz]``); it is imported only when drawing.
