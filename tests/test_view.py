@@ -36,15 +36,13 @@ from supportnode.msgs import (
     SupportSurfaces,
 )
 from supportnode.view.foxglove_bridge import (
-    OBSTACLE_COLOR,
-    SAFE_COLOR,
-    UNSAFE_COLOR,
     Bridge,
     quaternion_from_yaw,
     scan_pointcloud,
     scan_transform,
     timestamp,
 )
+from supportnode.view.style import OBSTACLE_COLOR, SAFE_COLOR, UNSAFE_COLOR
 
 # ------------------------------------------------------------ protobuf, decoded by its schema
 
