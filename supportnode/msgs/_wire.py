@@ -13,12 +13,13 @@ import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
-from typing import Any, NoReturn, TypeVar
+from typing import Any, TypeVar
 
 import msgpack
 import numpy as np
 
 from supportnode.errors import ConfigError, ProtocolError
+from supportnode.msgs._check import Check, dtype_choices, kind_of, short
 
 __all__ = [
     "DTYPES",
@@ -51,7 +52,6 @@ MAX_NDIM = 4
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}\Z")
 # seq is a uint64 on the wire.
 _UINT64_MAX = (1 << 64) - 1
-INT64_MIN, INT64_MAX = -(1 << 63), (1 << 63) - 1
 
 
 @dataclass(frozen=True)
@@ -102,123 +102,6 @@ class Header:
     raw: dict[str, Any]
 
 
-class Check:
-    """Raises one-line ProtocolErrors that name the topic; type checks of header values."""
-
-    def __init__(self, topic: str, prefix: str = "") -> None:
-        self.topic = topic
-        self.prefix = prefix  # "cannot encode: " when checking a message before sending it
-
-    def fail(self, problem: str, reason: str = "malformed") -> NoReturn:
-        """Raise the ProtocolError; ``reason``: what a receiver counts it under."""
-        raise ProtocolError(f"topic {self.topic!r}: {self.prefix}{problem}", reason)
-
-    def key(self, m: Mapping[str, Any], key: str, path: str = "header") -> Any:
-        """``m[key]``, or a failure naming the missing key."""
-        if key not in m:
-            self.fail(f"{path} has no key '{key}'")
-        return m[key]
-
-    def as_map(self, v: Any, what: str) -> dict[str, Any]:
-        if not isinstance(v, dict):
-            self.fail(f"{what} must be a map, got {_tname(v)}")
-        for k in v:
-            if not isinstance(k, str):
-                self.fail(f"{what} has a non-string key {short(k)}")
-        return v
-
-    def as_str(self, v: Any, what: str) -> str:
-        if not isinstance(v, str):
-            self.fail(f"{what} must be a string, got {_tname(v)}")
-        return v
-
-    def as_int(self, v: Any, what: str, lo: int = INT64_MIN, hi: int = INT64_MAX) -> int:
-        if isinstance(v, bool) or not isinstance(v, int):
-            self.fail(f"{what} must be an integer, got {_tname(v)}")
-        if not lo <= v <= hi:
-            self.fail(f"{what} = {v} is out of range [{lo}, {hi}]")
-        return v
-
-    def as_float(self, v: Any, what: str, lo: float = -math.inf) -> float:
-        """A finite number (msgpack float or int) >= lo."""
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.fail(f"{what} must be a number, got {_tname(v)}")
-        try:
-            x = float(v)
-        except OverflowError:  # a msgpack uint64 cannot overflow, but be safe
-            self.fail(f"{what} is out of range")
-        if not math.isfinite(x):
-            self.fail(f"{what} is {x} (must be finite)", "nonfinite")
-        if x < lo:
-            self.fail(f"{what} = {x} must be >= {lo}")
-        return x
-
-    def as_vector(self, v: Any, what: str, n: int) -> np.ndarray:
-        """A list of ``n`` finite numbers -> (n,) float64."""
-        if not isinstance(v, list) or len(v) != n:
-            got = f"{len(v)} items" if isinstance(v, list) else _tname(v)
-            self.fail(f"{what} must be a list of {n} numbers, got {got}")
-        return np.array([self.as_float(x, f"{what}[{i}]") for i, x in enumerate(v)])
-
-    def unit_quaternion(self, v: Any, what: str) -> np.ndarray:
-        q = self.as_vector(v, what, 4)
-        with np.errstate(over="ignore"):  # 1e308 components: norm inf, rejected below
-            norm = float(np.linalg.norm(q))
-        if abs(norm - 1.0) > 1e-3:
-            self.fail(f"{what} has norm {norm:.6g} (must be a unit quaternion x, y, z, w)")
-        return q
-
-    def array(
-        self,
-        buffers: Mapping[str, np.ndarray],
-        name: str,
-        dtypes: frozenset[str],
-        tail: tuple[int, ...] = (),
-    ) -> np.ndarray:
-        """Buffer ``name`` with a dtype from ``dtypes`` and shape (n, *tail)."""
-        if name not in buffers:
-            self.fail(f"missing buffer '{name}'")
-        a = buffers[name]
-        if a.dtype.str not in dtypes:
-            self.fail(f"buffer '{name}' has dtype '{a.dtype.str}', expected {_alts(dtypes)}")
-        if a.ndim != 1 + len(tail) or a.shape[1:] != tail:
-            want = "(n" + "".join(f", {t}" for t in tail) + (",)" if not tail else ")")
-            self.fail(f"buffer '{name}' has shape {a.shape}, expected {want}")
-        return a
-
-    def length(self, a: np.ndarray, name: str, n: int, of: str) -> None:
-        if len(a) != n:
-            self.fail(f"buffer '{name}' has {len(a)} rows, expected {n} ({of})")
-
-    def finite(self, a: np.ndarray, name: str) -> None:
-        if a.dtype.kind == "f":
-            bad = int(np.count_nonzero(~np.isfinite(a)))
-            if bad:
-                self.fail(f"{bad} NaN/Inf values in {name}", "nonfinite")
-
-    def offsets(self, a: np.ndarray, name: str, items: int, total: int) -> None:
-        """CSR offsets: (items + 1,) from 0 to ``total``, non-decreasing."""
-        self.length(a, name, items + 1, "one more than the items it splits")
-        # Bounds first: differences of arbitrary int64 values could wrap around.
-        if a[0] != 0 or a[-1] != total or bool(np.any(a < 0)) or bool(np.any(a > total)):
-            self.fail(f"buffer '{name}' must run from 0 to {total}")
-        if bool(np.any(np.diff(a) < 0)):
-            self.fail(f"buffer '{name}' must be non-decreasing")
-
-
-def _tname(v: Any) -> str:
-    return "nil" if v is None else type(v).__name__
-
-
-def short(v: Any) -> str:
-    r = repr(v)
-    return r if len(r) <= 40 else r[:37] + "..."
-
-
-def _alts(dtypes: frozenset[str]) -> str:
-    return " or ".join(f"'{d}'" for d in sorted(dtypes))
-
-
 def _topic_name(raw: bytes) -> str:
     # Undecodable topics are still named, readably, in the error.
     return raw[:64].decode("utf-8", "replace")
@@ -226,7 +109,7 @@ def _topic_name(raw: bytes) -> str:
 
 def _views(frames: Any) -> list[memoryview]:
     if isinstance(frames, (bytes, bytearray, memoryview, str)) or not isinstance(frames, Sequence):
-        raise ProtocolError(f"topic ?: message must be a list of frames, got {_tname(frames)}")
+        raise ProtocolError(f"topic ?: message must be a list of frames, got {kind_of(frames)}")
     if len(frames) < 2:
         name = "?"
         if frames:
@@ -242,7 +125,7 @@ def _views(frames: Any) -> list[memoryview]:
         try:
             mv = memoryview(f)
         except TypeError:
-            raise ProtocolError(f"topic ?: frame {i} is a {_tname(f)}, not bytes") from None
+            raise ProtocolError(f"topic ?: frame {i} is a {kind_of(f)}, not bytes") from None
         if not mv.c_contiguous:
             raise ProtocolError(f"topic ?: frame {i} is not contiguous memory")
         # Byte view of any buffer format; a zero-size view cannot be cast, and needs no cast.
@@ -299,7 +182,7 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
     except Exception as err:  # msgpack raises ValueError subclasses, UnicodeDecodeError, ...
         chk.fail(f"header is not valid msgpack ({type(err).__name__}: {short(str(err))})")
     if not isinstance(header, dict):
-        chk.fail(f"header must be a msgpack map, got {_tname(header)}")
+        chk.fail(f"header must be a msgpack map, got {kind_of(header)}")
     header = chk.as_map(header, "header")
     type_name = chk.as_str(chk.key(header, "type"), "header key 'type'")
     version = chk.as_int(chk.key(header, "version"), "header key 'version'")
@@ -330,7 +213,7 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
 
 def _buffer_specs(chk: Check, value: Any, frames: int) -> list[BufferSpec]:
     if not isinstance(value, list):
-        chk.fail(f"header key 'buffers' must be a list, got {_tname(value)}")
+        chk.fail(f"header key 'buffers' must be a list, got {kind_of(value)}")
     if len(value) != frames:
         chk.fail(f"header lists {len(value)} buffers, message has {frames} buffer frames")
     specs: list[BufferSpec] = []
@@ -347,7 +230,7 @@ def _buffer_specs(chk: Check, value: Any, frames: int) -> list[BufferSpec]:
         dtype = chk.as_str(chk.key(m, "dtype", what), f"buffer '{name}' dtype")
         if dtype not in DTYPES:
             chk.fail(
-                f"buffer '{name}' has unsupported dtype {short(dtype)} (allowed: {_alts(DTYPES)})"
+                f"buffer '{name}' has unsupported dtype {short(dtype)} (allowed: {dtype_choices(DTYPES)})"
             )
         shape = chk.key(m, "shape", what)
         if not isinstance(shape, list) or not 1 <= len(shape) <= MAX_NDIM:
@@ -386,7 +269,7 @@ def encode_frames(
     if isinstance(seq, bool) or not 0 <= int(seq) <= _UINT64_MAX:
         chk.fail(f"cannot encode: seq {seq!r} is not a uint64")
     if not isinstance(frame_id, str):
-        chk.fail(f"cannot encode: frame_id must be a string, got {_tname(frame_id)}")
+        chk.fail(f"cannot encode: frame_id must be a string, got {kind_of(frame_id)}")
     specs, bufs = [], []
     for name, a in arrays:
         if not isinstance(name, str) or not _NAME.match(name):
@@ -396,7 +279,7 @@ def encode_frames(
         a = little_endian(np.asarray(a))
         if a.dtype.str not in DTYPES:
             chk.fail(
-                f"cannot encode buffer '{name}' of dtype {a.dtype.str!r} (allowed: {_alts(DTYPES)})"
+                f"cannot encode buffer '{name}' of dtype {a.dtype.str!r} (allowed: {dtype_choices(DTYPES)})"
             )
         specs.append({"name": name, "dtype": a.dtype.str, "shape": list(a.shape)})
         bufs.append(memoryview(a))  # type: ignore[arg-type]  # numpy stubs lack Buffer
