@@ -23,20 +23,15 @@ from typing import Any
 from supportnode.cli._common import (
     add_curve_arguments,
     add_rerun_arguments,
-    curve_keys,
-    handshake_report,
     positive_number,
     positive_seconds,
 )
 from supportnode.cli._console import progress
+from supportnode.cli._view_receive import ns, receive, say, warn
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5556"
 DEFAULT_SCAN_ENDPOINT = "tcp://127.0.0.1:5555"
 RESULT_TOPICS = ("surfaces", "obstacles", "diagnostics", "map")
-# Results are small and every one matters for the deletions; of scans only the newest counts.
-_KEEP_RESULTS = 16
-_KEEP_SCANS = 1
-_QUEUE = 64  # decoded messages waiting for conversion; beyond that the oldest waits in ZeroMQ
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -142,15 +137,6 @@ def run(args: argparse.Namespace) -> int:
             signal.signal(s, h)
 
 
-def _warn(text: str) -> None:
-    print(f"supportnode view: warning: {text}", file=sys.stderr, flush=True)
-
-
-def _say(args: argparse.Namespace, text: str) -> None:
-    if not args.quiet:
-        print(f"view: {text}", flush=True)
-
-
 # ----------------------------------------------------------------------------------- convert
 
 
@@ -185,10 +171,10 @@ def _convert(args: argparse.Namespace) -> int:
                     skipped += 1
                     print(f"supportnode view: skipped: {err}", file=sys.stderr)
                     continue
-                channels.log(bridge.convert(msg, m.topic), _ns(m.time))
+                channels.log(bridge.convert(msg, m.topic), ns(m.time))
         for line in src.warnings:
             print(f"supportnode view: warning: {line}", file=sys.stderr)
-    _say(
+    say(
         args,
         f"wrote {channels.logged} messages on {', '.join(channels.topics) or 'no topics'} "
         f"to {args.out}" + (f" ({skipped} skipped)" if skipped else ""),
@@ -202,10 +188,6 @@ def _count(src: Any) -> int | None:
     return None if None in counts else sum(c for c in counts if c is not None)
 
 
-def _ns(seconds: float) -> int:
-    return max(0, round(seconds * 1e9))
-
-
 # ------------------------------------------------------------------------------------- serve
 
 
@@ -217,15 +199,15 @@ def _serve(args: argparse.Namespace, stop: threading.Event) -> int:
     from supportnode.view.sink import Channels, serve
 
     ctx = foxglove.Context()
-    server = serve(ctx, args.host, args.port, args.allow_origin, _warn)
+    server = serve(ctx, args.host, args.port, args.allow_origin, warn)
     channels = Channels(ctx)
     try:
-        _say(
+        say(
             args,
             f"open {server.app_url(args.host)}  (or connect Foxglove to {server.ws_url(args.host)})",
         )
         if server.exposed:
-            _warn(
+            warn(
                 "every port browsers cannot reach is in use: the Foxglove server listens on "
                 f"127.0.0.1:{server.server.port}, where the origin check can be bypassed"
             )
@@ -237,108 +219,12 @@ def _serve(args: argparse.Namespace, stop: threading.Event) -> int:
     finally:
         channels.close()
         server.stop()
-    _say(args, f"forwarded {channels.logged} messages")
+    say(args, f"forwarded {channels.logged} messages")
     return 0
 
 
 def _live(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels: Any) -> None:
-    _receive(args, stop, lambda topic, msg, t: channels.log(bridge.convert(msg, topic), _ns(t)))
-
-
-def _receive(args: argparse.Namespace, stop: threading.Event, handle: Any) -> None:
-    """Subscribe to the node's topics (and the scans) and call ``handle(topic, message,
-    receive time)`` for each until ``stop``, Ctrl-C or ``--duration``."""
-    import queue
-    import time
-
-    inbox: queue.Queue = queue.Queue(maxsize=_QUEUE)
-    wanted = [(args.endpoint, args.topics, _KEEP_RESULTS)]
-    if not args.no_scan:
-        wanted.append((args.scan_endpoint, [args.scan_topic], _KEEP_SCANS))
-    receivers: list[Receiver] = []
-    deadline = None if args.duration is None else time.monotonic() + args.duration
-    try:
-        for i, (endpoint, topics, keep) in enumerate(wanted):
-            curve = curve_keys(args, bind=False, index=i)
-            receivers.append(Receiver(endpoint, topics, keep, inbox, stop, curve))
-            receivers[-1].start()
-        while not stop.is_set():
-            if deadline is not None and time.monotonic() >= deadline:
-                break
-            try:
-                topic, msg, received = inbox.get(timeout=0.1)
-            except queue.Empty:
-                continue
-            handle(topic, msg, received)
-    finally:
-        stop.set()
-        for r in receivers:
-            r.join(2.0)
-    rejected = sum(r.rejected for r in receivers)
-    if rejected:
-        last = next(r.last_error for r in receivers if r.last_error)
-        _say(args, f"{rejected} malformed messages skipped (last: {last})")
-
-
-class Receiver(threading.Thread):
-    """Subscribes to ``topics`` at ``endpoint`` and puts (topic, decoded message, receive time)
-    into ``inbox`` until ``stop`` is set. The socket is opened in the caller's thread (so that a
-    bad endpoint raises there) and used only by this thread afterwards."""
-
-    def __init__(
-        self,
-        endpoint: str,
-        topics: list[str],
-        keep_newest: int,
-        inbox: Any,
-        stop: threading.Event,
-        curve: Any = None,
-    ) -> None:
-        from supportnode import bus
-        from supportnode.msgs import Limits
-
-        super().__init__(daemon=True, name=f"view {endpoint}")
-        self.limits = Limits()
-        self.sub = bus.Subscriber(
-            endpoint,
-            topics,
-            keep_newest=keep_newest,
-            max_message_bytes=self.limits.max_message_bytes,
-            curve=curve,
-            watch=handshake_report("view"),
-        )
-        self.inbox, self.stop = inbox, stop
-        self.rejected = 0
-        self.last_error: str | None = None
-
-    def run(self) -> None:
-        import queue
-        import time
-
-        from supportnode.errors import ProtocolError
-        from supportnode.msgs import decode_any
-
-        try:
-            while not self.stop.is_set():
-                frames = self.sub.recv(0.1)  # short: notices `stop` soon
-                if frames is None:
-                    continue
-                received = time.time()
-                try:
-                    msg = decode_any(frames, self.limits)
-                except ProtocolError as err:
-                    self.rejected += 1
-                    self.last_error = str(err)
-                    continue
-                topic = bytes(memoryview(frames[0])).decode("utf-8", "replace")
-                while not self.stop.is_set():
-                    try:
-                        self.inbox.put((topic, msg, received), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-        finally:
-            self.sub.close()
+    receive(args, stop, lambda topic, msg, t: channels.log(bridge.convert(msg, topic), ns(t)))
 
 
 def _replay(args: argparse.Namespace, stop: threading.Event, bridge: Any, channels: Any) -> None:
@@ -371,7 +257,7 @@ def _replay(args: argparse.Namespace, stop: threading.Event, bridge: Any, channe
             print(f"supportnode view: warning: {line}", file=sys.stderr)
     if not stop.is_set() and (end is None or time.monotonic() < end):
         # Keep serving, so that the last scene stays on screen until the user is done.
-        _say(args, "end of the recording; Ctrl-C to stop")
+        say(args, "end of the recording; Ctrl-C to stop")
         stop.wait(None if end is None else max(0.0, end - time.monotonic()))
 
 
@@ -389,7 +275,7 @@ def _rerun(args: argparse.Namespace) -> int:
     try:
         with RerunScene("save" if args.save else args.rerun, args.save) as scene:
             if scene.url is not None:
-                _say(args, f"open {scene.url}")
+                say(args, f"open {scene.url}")
             if args.source is None:
                 counter = [0]
 
@@ -397,17 +283,17 @@ def _rerun(args: argparse.Namespace) -> int:
                     scene.log_message(topic, msg)
                     counter[0] += 1
 
-                _receive(args, stop, handle)
+                receive(args, stop, handle)
                 shown = counter[0]
             else:
                 shown = _rerun_source(args, scene)
                 if scene.url is not None:  # keep serving until the user is done
-                    _say(args, "end of the recording; Ctrl-C to stop")
+                    say(args, "end of the recording; Ctrl-C to stop")
                     stop.wait(args.duration)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    _say(args, f"{shown} messages" + (f" written to {args.save}" if args.save else " shown"))
+    say(args, f"{shown} messages" + (f" written to {args.save}" if args.save else " shown"))
     return 0
 
 
