@@ -83,6 +83,10 @@ def _clean_name(name: str) -> str:
     return "" if not out.strip("_") else out
 
 
+# (ros name, our name, byte offset in the point, count, little-endian dtype code)
+_Field = tuple[str, str, int, int, str]
+
+
 def pointcloud2_to_cloud(
     msg: Any, *, seq: int = 0, warnings: list[str] | None = None
 ) -> PointCloud:
@@ -91,14 +95,27 @@ def pointcloud2_to_cloud(
     order, stamp in seconds, frame_id from the header. ``seq``: used when the header has none
     (ROS 2). Fields left out are described in ``warnings`` (when given). Raises PointCloud2Error.
     """
-    height, width = int(msg.height), int(msg.width)
-    point_step, row_step = int(msg.point_step), int(msg.row_step)
     data = msg.data if isinstance(msg.data, np.ndarray) else np.frombuffer(msg.data, np.uint8)
     data = np.ascontiguousarray(data).view(np.uint8).reshape(-1)
-    order = ">" if bool(msg.is_bigendian) else "<"
+    _check_layout(msg, data)
+    keep = _kept_fields(list(msg.fields), int(msg.point_step), warnings)
+    cols = _columns(msg, data, keep)
+    header_seq = getattr(msg.header, "seq", None)
+    coords = {k: cols.pop(k) for k in ("x", "y", "z")}  # x, y, z first, as on the wire
+    return PointCloud(
+        stamp=_seconds(msg.header.stamp),
+        frame_id=str(msg.header.frame_id),
+        fields={**coords, **cols},
+        seq=int(header_seq) if header_seq is not None else seq,
+    )
+
+
+def _check_layout(msg: Any, data: np.ndarray) -> None:
+    """x, y and z present; steps and the data's size consistent with height x width points."""
+    height, width = int(msg.height), int(msg.width)
+    point_step, row_step = int(msg.point_step), int(msg.row_step)
     n = height * width
-    fields = list(msg.fields)
-    names = [f.name for f in fields]
+    names = [f.name for f in msg.fields]
     for axis in ("x", "y", "z"):
         if axis not in names:
             raise PointCloud2Error(
@@ -116,24 +133,36 @@ def pointcloud2_to_cloud(
             f"PointCloud2 data has {data.size} bytes, {height} rows of row_step {row_step} "
             f"need {need}"
         )
-    keep: list[tuple[str, str, int, int, str]] = []  # (ros name, our name, offset, count, code)
+
+
+def _field_problem(f: Any, point_step: int) -> str | None:
+    """Why field ``f`` cannot be converted (None: it can), before its name is considered."""
+    name, offset, count = str(f.name), int(f.offset), int(f.count)
+    xyz = name in ("x", "y", "z")
+    kind = DATATYPES.get(int(f.datatype))
+    if kind is None:
+        return f"has unknown datatype {int(f.datatype)} (known: 1 INT8 .. 8 FLOAT64)"
+    if xyz and kind[0] not in ("f4", "f8"):
+        return f"has datatype {kind[1]}; x, y and z must be FLOAT32 or FLOAT64"
+    if xyz and count != 1:
+        return f"has count {count}; x, y and z must have count 1"
+    if count < 1 or count > _MAX_COLUMNS:
+        return f"has count {count} (1 to {_MAX_COLUMNS} supported)"
+    if offset < 0 or offset + np.dtype(kind[0]).itemsize * count > point_step:
+        size = np.dtype(kind[0]).itemsize * count
+        return f"at offset {offset} with {size} bytes extends past point_step {point_step}"
+    return None
+
+
+def _kept_fields(fields: list[Any], point_step: int, warnings: list[str] | None) -> list[_Field]:
+    """The fields to convert; a bad x, y or z raises, any other bad field is left out with a
+    warning."""
+    keep: list[_Field] = []
     seen: set[str] = set()
     for f in fields:
-        name, offset, count = str(f.name), int(f.offset), int(f.count)
+        name = str(f.name)
         xyz = name in ("x", "y", "z")
-        kind = DATATYPES.get(int(f.datatype))
-        problem = None
-        if kind is None:
-            problem = f"has unknown datatype {int(f.datatype)} (known: 1 INT8 .. 8 FLOAT64)"
-        elif xyz and kind[0] not in ("f4", "f8"):
-            problem = f"has datatype {kind[1]}; x, y and z must be FLOAT32 or FLOAT64"
-        elif xyz and count != 1:
-            problem = f"has count {count}; x, y and z must have count 1"
-        elif count < 1 or count > _MAX_COLUMNS:
-            problem = f"has count {count} (1 to {_MAX_COLUMNS} supported)"
-        elif offset < 0 or offset + np.dtype(kind[0]).itemsize * count > point_step:
-            size = np.dtype(kind[0]).itemsize * count
-            problem = f"at offset {offset} with {size} bytes extends past point_step {point_step}"
+        problem = _field_problem(f, point_step)
         clean = name if xyz else _clean_name(name)
         if problem is None and not clean:
             problem = "has a name that is not an identifier"
@@ -145,9 +174,17 @@ def pointcloud2_to_cloud(
             if warnings is not None:
                 warnings.append(f"PointCloud2 field '{name}' left out: it {problem}")
             continue
-        assert kind is not None
         seen.add(clean)
-        keep.append((name, clean, offset, count, kind[0]))
+        keep.append((name, clean, int(f.offset), int(f.count), DATATYPES[int(f.datatype)][0]))
+    return keep
+
+
+def _columns(msg: Any, data: np.ndarray, keep: list[_Field]) -> dict[str, np.ndarray]:
+    """One little-endian column per kept field: (N,) or (N, count)."""
+    height, width = int(msg.height), int(msg.width)
+    point_step, row_step = int(msg.point_step), int(msg.row_step)
+    order = ">" if bool(msg.is_bigendian) else "<"
+    n = height * width
     cols: dict[str, np.ndarray] = {}
     if n:
         layout = np.dtype(
@@ -173,14 +210,7 @@ def pointcloud2_to_cloud(
         if clean in ("rgb", "rgba") and code == "f4" and count == 1:
             col = col.view("<u4")  # PCL packs colour bits into a float: our convention is <u4
         cols[clean] = col
-    header_seq = getattr(msg.header, "seq", None)
-    coords = {k: cols.pop(k) for k in ("x", "y", "z")}  # x, y, z first, as on the wire
-    return PointCloud(
-        stamp=_seconds(msg.header.stamp),
-        frame_id=str(msg.header.frame_id),
-        fields={**coords, **cols},
-        seq=int(header_seq) if header_seq is not None else seq,
-    )
+    return cols
 
 
 _TYPESTORES: dict[str, Any] = {}
