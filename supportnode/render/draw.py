@@ -95,8 +95,6 @@ def draw_frame(
     """
     _require_matplotlib()
     from matplotlib import patheffects
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
 
     basis = view_basis(view)
     colours = point_colours(frame, color)
@@ -106,22 +104,10 @@ def draw_frame(
     if max_points < 1:
         raise SupportNodeError(f"max_points must be at least 1, got {max_points}")
     result = frame.result
-    n_all = len(frame.points)
 
     # Text size follows the picture so small and large ones stay legible; margins follow text.
     fs = 9.0 * float(np.clip(min(w_px, h_px) / 900.0, 0.7, 2.0))
-    line = fs * dpi / 72.0 * 1.5  # one line of text, px
-    fig = Figure(figsize=(w_px / dpi, h_px / dpi), dpi=dpi, facecolor="white")
-    FigureCanvasAgg(fig)  # attaches itself: savefig and canvas.draw work without pyplot
-    left, bottom, right = 4.5 * line, 3.2 * line, 1.0 * line
-    if view == "oblique":  # no tick labels
-        left, bottom = 1.0 * line, 2.0 * line
-    legend = _place_legend(fig, legend_handles(frame, color, fs), left, 1.7 * line, fs, w_px)
-    top = 1.7 * line + legend.get_window_extent().height + 0.6 * line
-    box = [left / w_px, bottom / h_px, 1 - (left + right) / w_px, 1 - (bottom + top) / h_px]
-    if box[2] <= 0.1 or box[3] <= 0.1:
-        raise SupportNodeError(f"picture size {w_px}x{h_px} is too small for its text")
-    ax = fig.add_axes(box)
+    fig, ax, box = _figure_and_axes(frame, view, color, (w_px, h_px), dpi, fs)
     box_w, box_h = box[2] * w_px, box[3] * h_px
 
     lo, hi = extent(frame, basis)
@@ -139,27 +125,71 @@ def draw_frame(
     draw_surfaces(ax, result, basis, labels, fs, lw)
     draw_objects(ax, result, basis, view, color, labels, fs, lw)
     draw_discs(ax, result, basis, lw)
+    _texts(fig, ax, frame, view, box, drawn, labels.hidden, (xlim, ylim), fs, (w_px, h_px), dpi)
+    return fig, ax
 
+
+def _text_line(fs: float, dpi: float) -> float:
+    """Height of one line of text at font size ``fs``, pixels."""
+    return fs * dpi / 72.0 * 1.5
+
+
+def _figure_and_axes(
+    frame: Frame, view: str, color: str, size: tuple[int, int], dpi: float, fs: float
+) -> tuple[Figure, Axes, list[float]]:
+    """A figure of exactly ``size`` pixels with its legend on top, and the axes below it in
+    ``box`` (left, bottom, width, height as fractions of the figure)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    w_px, h_px = size
+    line = _text_line(fs, dpi)
+    fig = Figure(figsize=(w_px / dpi, h_px / dpi), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)  # attaches itself: savefig and canvas.draw work without pyplot
+    left, bottom, right = 4.5 * line, 3.2 * line, 1.0 * line
+    if view == "oblique":  # no tick labels
+        left, bottom = 1.0 * line, 2.0 * line
+    legend = _place_legend(fig, legend_handles(frame, color, fs), left, 1.7 * line, fs, w_px)
+    top = 1.7 * line + legend.get_window_extent().height + 0.6 * line
+    box = [left / w_px, bottom / h_px, 1 - (left + right) / w_px, 1 - (bottom + top) / h_px]
+    if box[2] <= 0.1 or box[3] <= 0.1:
+        raise SupportNodeError(f"picture size {w_px}x{h_px} is too small for its text")
+    return fig, fig.add_axes(box), box
+
+
+def _texts(
+    fig: Figure,
+    ax: Axes,
+    frame: Frame,
+    view: str,
+    box: list[float],
+    drawn: int,
+    hidden: int,
+    limits: tuple[tuple[float, float], tuple[float, float]],
+    fs: float,
+    size: tuple[int, int],
+    dpi: float,
+) -> None:
+    """Title, scale bar, axis labels and the footnote (notes, labels left out)."""
+    w_px, h_px = size
+    line = _text_line(fs, dpi)
     fig.text(
         box[0],
         1 - 0.6 * line / h_px,
-        _title(frame, view, drawn, n_all),
+        _title(frame, view, drawn, len(frame.points)),
         fontsize=fs * 1.2,
         va="top",
     )
-    _scale_bar(ax, xlim, ylim, fs)
+    _scale_bar(ax, limits[0], limits[1], fs)
     _axes_labels(ax, view, fs)
     notes = list(frame.notes)
-    if labels.hidden:
-        notes.append(
-            f"{labels.hidden} crowded object label{'s' if labels.hidden > 1 else ''} left out"
-        )
+    if hidden:
+        notes.append(f"{hidden} crowded object label{'s' if hidden > 1 else ''} left out")
     if notes:
         fig.text(
             1 - 0.3 * line / w_px, 0.3 * line / h_px, "; ".join(notes),
             ha="right", va="bottom", fontsize=fs * 0.85, color="0.3",
         )  # fmt: skip
-    return fig, ax
 
 
 def _place_legend(fig: Figure, handles: list, left: float, top: float, fs: float, w_px: int):
