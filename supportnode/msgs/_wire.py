@@ -140,16 +140,7 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
     header), by name. Type-specific keys and buffer contents are the message classes' job.
     """
     views = _views(frames)
-    raw_topic = bytes(views[0])
-    if len(raw_topic) > MAX_TOPIC_BYTES:
-        raise ProtocolError(
-            f"topic {_topic_name(raw_topic)!r}: topic has {len(raw_topic)} bytes "
-            f"(at most {MAX_TOPIC_BYTES})"
-        )
-    try:
-        topic = raw_topic.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ProtocolError(f"topic {_topic_name(raw_topic)!r}: topic is not UTF-8") from None
+    topic = _topic(bytes(views[0]))
     chk = Check(topic)
     total = sum(v.nbytes for v in views)
     if total > limits.max_message_bytes:
@@ -159,31 +150,7 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
         )
     if len(views) - 2 > limits.max_buffers:
         chk.fail(f"{len(views) - 2} buffer frames exceed max_buffers {limits.max_buffers}")
-    hb = views[1]
-    if hb.nbytes > limits.max_header_bytes:
-        chk.fail(
-            f"header has {hb.nbytes} bytes, exceeds max_header_bytes {limits.max_header_bytes}"
-        )
-    n = max(hb.nbytes, 1)
-    try:
-        # Every container and string is bounded by the header's own size, extension types
-        # (timestamps, custom) are refused; the C unpacker bounds nesting depth itself.
-        header = msgpack.unpackb(
-            hb,
-            raw=False,
-            strict_map_key=True,
-            use_list=True,
-            max_str_len=n,
-            max_bin_len=n,
-            max_array_len=n,
-            max_map_len=n,
-            max_ext_len=0,
-        )
-    except Exception as err:  # msgpack raises ValueError subclasses, UnicodeDecodeError, ...
-        chk.fail(f"header is not valid msgpack ({type(err).__name__}: {short(str(err))})")
-    if not isinstance(header, dict):
-        chk.fail(f"header must be a msgpack map, got {kind_of(header)}")
-    header = chk.as_map(header, "header")
+    header = chk.as_map(_unpack_header(chk, views[1], limits), "header")
     type_name = chk.as_str(chk.key(header, "type"), "header key 'type'")
     version = chk.as_int(chk.key(header, "version"), "header key 'version'")
     if version != SCHEMA_VERSION:
@@ -209,6 +176,47 @@ def parse_frames(frames: Any, limits: Limits) -> tuple[Header, dict[str, np.ndar
         arrays[spec.name] = np.frombuffer(view, dtype=np.dtype(spec.dtype)).reshape(spec.shape)
     hdr = Header(topic, type_name, version, stamp, frame_id, seq, tuple(specs), header)
     return hdr, arrays
+
+
+def _topic(raw_topic: bytes) -> str:
+    """The topic frame as text: at most MAX_TOPIC_BYTES of UTF-8."""
+    if len(raw_topic) > MAX_TOPIC_BYTES:
+        raise ProtocolError(
+            f"topic {_topic_name(raw_topic)!r}: topic has {len(raw_topic)} bytes "
+            f"(at most {MAX_TOPIC_BYTES})"
+        )
+    try:
+        return raw_topic.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ProtocolError(f"topic {_topic_name(raw_topic)!r}: topic is not UTF-8") from None
+
+
+def _unpack_header(chk: Check, hb: memoryview, limits: Limits) -> dict[str, Any]:
+    """The header frame unpacked: a msgpack map within max_header_bytes."""
+    if hb.nbytes > limits.max_header_bytes:
+        chk.fail(
+            f"header has {hb.nbytes} bytes, exceeds max_header_bytes {limits.max_header_bytes}"
+        )
+    n = max(hb.nbytes, 1)
+    try:
+        # Every container and string is bounded by the header's own size, extension types
+        # (timestamps, custom) are refused; the C unpacker bounds nesting depth itself.
+        header = msgpack.unpackb(
+            hb,
+            raw=False,
+            strict_map_key=True,
+            use_list=True,
+            max_str_len=n,
+            max_bin_len=n,
+            max_array_len=n,
+            max_map_len=n,
+            max_ext_len=0,
+        )
+    except Exception as err:  # msgpack raises ValueError subclasses, UnicodeDecodeError, ...
+        chk.fail(f"header is not valid msgpack ({type(err).__name__}: {short(str(err))})")
+    if not isinstance(header, dict):
+        chk.fail(f"header must be a msgpack map, got {kind_of(header)}")
+    return header
 
 
 def _buffer_specs(chk: Check, value: Any, frames: int) -> list[BufferSpec]:
