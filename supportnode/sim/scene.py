@@ -176,6 +176,27 @@ class _Parser:
     ) -> None:
         name = self.name_value(m, "name", f"primitive {path}") if "name" in m else ""
         label = f"primitive {name!r}" if name else f"primitive {path}"
+        kind = self.kind(m, label)
+        xyz = self.numbers(m, "xyz", 3, label) if "xyz" in m else [0.0, 0.0, 0.0]
+        rpy = self.numbers(m, "rpy", 3, label) if "rpy" in m else [0.0, 0.0, 0.0]
+        pose = parent @ pose_matrix(xyz, rpy)
+        labels = dict(inherited)
+        for key in ("role", "object", "surface"):
+            if key in m:
+                labels[key] = (self.name_value(m, key, label), self.line_of(m, key), scope)
+
+        if kind == "group":
+            self.children(
+                m["children"], self.line_of(m, "children"), pose, labels, scope, path, stack
+            )
+            return
+        if kind == "use":
+            self.use(m, name, label, pose, labels, scope, stack)
+            return
+        self.leaf(m, kind, name, label, pose, labels)
+
+    def kind(self, m: LineMap, label: str) -> str:
+        """The item's kind (``use`` for an instance of a define), its keys checked for it."""
         if "use" in m:
             kind = "use"
         elif "kind" not in m:
@@ -197,43 +218,39 @@ class _Parser:
         for key in sorted(_SHAPE_KEYS[kind]):
             if key not in m:
                 raise self.fail(m.line, f"{label}: missing key {key!r}")
+        return str(kind)
 
-        xyz = self.numbers(m, "xyz", 3, label) if "xyz" in m else [0.0, 0.0, 0.0]
-        rpy = self.numbers(m, "rpy", 3, label) if "rpy" in m else [0.0, 0.0, 0.0]
-        pose = parent @ pose_matrix(xyz, rpy)
-        labels = dict(inherited)
-        for key in ("role", "object", "surface"):
-            if key in m:
-                labels[key] = (self.name_value(m, key, label), self.line_of(m, key), scope)
-
-        if kind == "group":
-            self.children(
-                m["children"], self.line_of(m, "children"), pose, labels, scope, path, stack
-            )
-            return
-        if kind == "use":
-            target = self.name_value(m, "use", label)
-            line = self.line_of(m, "use")
-            if target not in self.defines:
-                known = ", ".join(sorted(map(str, self.defines))) or "none defined"
-                raise self.fail(line, f"{label}: unknown define {target!r} (known: {known})")
-            if target in stack:
-                raise self.fail(line, f"{label}: define {target!r} uses itself")
-            count = self.use_counts.get(target, 0)
-            self.use_counts[target] = count + 1
-            instance = name or f"{target}_{count}"
-            new_scope = f"{scope}{instance}/"
-            self.children(
-                self.defines[target],
-                self.defines.key_lines[target],
-                pose,
-                labels,
-                new_scope,
-                f"{target}",
-                [*stack, target],
-            )
-            return
-        self.leaf(m, kind, name, label, pose, labels)
+    def use(
+        self,
+        m: LineMap,
+        name: str,
+        label: str,
+        pose: np.ndarray,
+        labels: dict[str, Any],
+        scope: str,
+        stack: list[str],
+    ) -> None:
+        """An instance of a define: its primitives under ``pose``, ids scoped by the instance."""
+        target = self.name_value(m, "use", label)
+        line = self.line_of(m, "use")
+        if target not in self.defines:
+            known = ", ".join(sorted(map(str, self.defines))) or "none defined"
+            raise self.fail(line, f"{label}: unknown define {target!r} (known: {known})")
+        if target in stack:
+            raise self.fail(line, f"{label}: define {target!r} uses itself")
+        count = self.use_counts.get(target, 0)
+        self.use_counts[target] = count + 1
+        instance = name or f"{target}_{count}"
+        new_scope = f"{scope}{instance}/"
+        self.children(
+            self.defines[target],
+            self.defines.key_lines[target],
+            pose,
+            labels,
+            new_scope,
+            f"{target}",
+            [*stack, target],
+        )
 
     def leaf(
         self, m: LineMap, kind: str, name: str, label: str, pose: np.ndarray, labels: dict[str, Any]
