@@ -70,7 +70,7 @@ class Subscriber(Closing):
         *,
         bind: bool = False,
         keep_newest: int = 1,
-        context: zmq.Context | None = None,
+        context: zmq.Context[Any] | None = None,
     ) -> None:
         self.limits = limits if limits is not None else Limits()
         self.timeout = timeout
@@ -163,7 +163,7 @@ class Publisher(Closing):
         bind: bool = True,
         *,
         hwm: int = 10,
-        context: zmq.Context | None = None,
+        context: zmq.Context[Any] | None = None,
     ) -> None:
         self.topic = topic
         self.seq = 0  # sequence number of the last cloud sent by publish_cloud

@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import venv
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -72,6 +73,8 @@ def test_built_wheel_installs_and_runs_the_demo_outside_the_repo(tmp_path: Path)
     )
     assert len(list(dist.glob("supportnode-*.tar.gz"))) == 1
     (wheel,) = dist.glob("supportnode-*.whl")  # built from the sdist: both are checked
+    with zipfile.ZipFile(wheel) as zf:  # type checkers see the package's annotations (PEP 561)
+        assert "supportnode/py.typed" in zf.namelist()
     env_dir = tmp_path / "venv"
     venv.create(env_dir, with_pip=True)
     bin_dir = env_dir / "bin"

@@ -78,7 +78,7 @@ def quaternion_from_matrix(r: np.ndarray) -> np.ndarray:
         s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
         q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s]
     out = np.asarray(q, dtype=np.float64)
-    return out / np.linalg.norm(out)
+    return _unit(out)
 
 
 def quaternion_from_yaw(yaw: float) -> tuple[float, float, float, float]:
@@ -112,8 +112,12 @@ def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
     if dot < 0:  # q and -q are one rotation: take the short way
         b, dot = -b, -dot
     if dot > 0.9995:  # nearly equal: linear is exact enough and avoids dividing by sin ~ 0
-        out = a + s * (b - a)
-        return out / np.linalg.norm(out)
+        return _unit(a + s * (b - a))
     theta = np.arccos(min(1.0, dot))
-    out = (np.sin((1 - s) * theta) * a + np.sin(s * theta) * b) / np.sin(theta)
-    return out / np.linalg.norm(out)
+    return _unit((np.sin((1 - s) * theta) * a + np.sin(s * theta) * b) / np.sin(theta))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """``v`` scaled to length 1, float64."""
+    out: np.ndarray = np.asarray(v, dtype=np.float64) / float(np.linalg.norm(v))
+    return out

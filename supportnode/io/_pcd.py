@@ -27,8 +27,8 @@ _TYPES = {
     ("I", 8): "i8",
 }
 _DATA_KINDS = ("ascii", "binary", "binary_compressed")
-_KNOWN_KEYS = ("VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT")
-_KNOWN_KEYS += ("VIEWPOINT", "POINTS", "DATA")
+_KNOWN_KEYS: tuple[str, ...] = ("VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT")
+_KNOWN_KEYS += ("WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 
 
 @dataclass

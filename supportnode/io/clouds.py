@@ -16,6 +16,7 @@ import zipfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -323,7 +324,8 @@ def write_cloud(
             else:
                 if "points" in flds:
                     raise CloudFormatError(f"{name}: a field may not be called 'points'")
-                np.savez(fh, points=pts, **flds)
+                # Any: numpy's stub reads a ** mapping as possibly holding its allow_pickle flag.
+                np.savez(fh, points=pts, **cast("dict[str, Any]", flds))
     except OSError as err:
         raise CloudFormatError(f"{name}: cannot write ({err.strerror or err})") from err
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -68,7 +69,8 @@ def write_detection(
             write_ply(path, points[idx])
             written.append(path)
     labels_path = out / "labels.npz"
-    np.savez_compressed(labels_path, **arrays)
+    # Any: numpy's stub reads a ** mapping as possibly holding its allow_pickle flag.
+    np.savez_compressed(labels_path, **cast("dict[str, Any]", arrays))
     written.append(labels_path)
 
     result = {

@@ -85,4 +85,5 @@ def decode_any(
     if header.type == "PointCloud":
         return PointCloud._from_parsed(header, buffers, limits, drop_nonfinite)
     cls = MESSAGE_TYPES[header.type]  # parse_frames accepted only known types
-    return cls._from_parsed(header, buffers, limits)
+    msg: Message = cls._from_parsed(header, buffers, limits)
+    return msg

@@ -319,4 +319,5 @@ class Decodable:
         """Validated message from ``[topic, header, *buffers]``; any problem is a ProtocolError."""
         limits = limits or Limits()
         header, buffers = parse_frames(frames, limits)
-        return cls._from_parsed(header, buffers, limits)  # type: ignore[attr-defined]
+        msg: M = cls._from_parsed(header, buffers, limits)  # type: ignore[attr-defined]
+        return msg

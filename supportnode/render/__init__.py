@@ -77,7 +77,7 @@ def write_png(fig, out: Path, *, palette: bool = True) -> None:
     fig.canvas.draw()
     rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
     # method 2 = fast octree, dither 0 = none; plain ints so Pillow < 9.1 (no enums) works too
-    img = Image.fromarray(np.ascontiguousarray(rgb)).quantize(256, method=2, dither=0)
+    img = Image.fromarray(np.ascontiguousarray(rgb)).quantize(256, method=2, dither=0)  # type: ignore[arg-type]
     img.save(out, format="png", dpi=(fig.dpi, fig.dpi))
 
 

@@ -154,7 +154,7 @@ def _figure_and_axes(
     box = [left / w_px, bottom / h_px, 1 - (left + right) / w_px, 1 - (bottom + top) / h_px]
     if box[2] <= 0.1 or box[3] <= 0.1:
         raise SupportNodeError(f"picture size {w_px}x{h_px} is too small for its text")
-    return fig, fig.add_axes(box), box
+    return fig, fig.add_axes((box[0], box[1], box[2], box[3])), box
 
 
 def _texts(
@@ -196,7 +196,7 @@ def _place_legend(fig: Figure, handles: list, left: float, top: float, fs: float
     """The legend in as many columns as fit the picture's width (measured, not guessed), its
     top-left corner `left`, `top` pixels from the figure's top-left."""
     h_px = fig.get_size_inches()[1] * fig.dpi
-    renderer = fig.canvas.get_renderer()
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]  # an Agg canvas
     for ncol in range(len(handles), 0, -1):
         legend = fig.legend(
             handles=handles,

@@ -100,7 +100,7 @@ class Labels:
         self.boxes.append(boxes[best])
         self.ax.annotate(
             text,
-            xy=anchors[best],
+            xy=(float(anchors[best][0]), float(anchors[best][1])),
             xytext=(dx, dy),
             textcoords="offset pixels",
             ha="left",

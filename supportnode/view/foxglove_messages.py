@@ -148,8 +148,10 @@ def _packed(
     rows = np.empty(len(columns[0][1]), dtype=np.dtype(dtypes))  # packed, no padding
     for name, a in columns:
         rows[name] = a
+    layout = rows.dtype.fields
+    assert layout is not None  # a structured dtype, built just above
     fields = [
-        PackedElementField(name=name, offset=rows.dtype.fields[name][1], type=_NUMERIC[dt[1:]])
+        PackedElementField(name=name, offset=layout[name][1], type=_NUMERIC[dt[1:]])
         for name, dt in dtypes
     ]
     return fields, rows.dtype.itemsize, rows.tobytes()
@@ -283,7 +285,7 @@ def cluster_entity(c: ObstacleCluster, stamp: float, frame_id: str) -> SceneEnti
         ],
         cubes=[
             CubePrimitive(
-                pose=_pose(center, quaternion_from_yaw(c.obb_yaw)),
+                pose=_pose(center.tolist(), quaternion_from_yaw(c.obb_yaw)),
                 size=Vector3(x=float(size[0]), y=float(size[1]), z=float(size[2])),
                 color=_color(OBSTACLE_COLOR if on else LOOSE_OBSTACLE_COLOR),
             )
@@ -295,11 +297,11 @@ def cluster_entity(c: ObstacleCluster, stamp: float, frame_id: str) -> SceneEnti
 def cluster_points(msg: ObstacleClusters) -> FoxPointCloud | None:
     """The clusters' subsampled points as one PointCloud (float32 x, y, z, int32 ``cluster``
     id per point), or None when no cluster carries points."""
-    parts = [c for c in msg.clusters if c.points is not None and len(c.points)]
+    parts = [(c.id, c.points) for c in msg.clusters if c.points is not None and len(c.points)]
     if not parts:
         return None
-    pts = np.concatenate([np.asarray(c.points, dtype=np.float32) for c in parts])
-    ids = np.repeat(np.array([c.id for c in parts], dtype=np.int32), [len(c.points) for c in parts])
+    pts = np.concatenate([np.asarray(p, dtype=np.float32) for _, p in parts])
+    ids = np.repeat(np.array([i for i, _ in parts], dtype=np.int32), [len(p) for _, p in parts])
     columns = [("x", pts[:, 0]), ("y", pts[:, 1]), ("z", pts[:, 2]), ("cluster", ids)]
     return _point_cloud(msg.stamp, msg.frame_id, columns)
 

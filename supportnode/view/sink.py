@@ -127,6 +127,6 @@ def write_mcap(context: foxglove.Context, path: str | os.PathLike[str]) -> Any:
     """An MCAP writer recording every channel of ``context`` to ``path`` (overwritten; zstd
     chunks, indexed). Close it (or use ``with``) to finish the file."""
     try:
-        return foxglove.open_mcap(path, allow_overwrite=True, context=context)
+        return foxglove.open_mcap(os.fspath(path), allow_overwrite=True, context=context)
     except (RuntimeError, OSError) as err:
         raise ViewError(f"{os.fspath(path)}: cannot write ({err})") from err
