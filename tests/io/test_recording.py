@@ -26,7 +26,7 @@ from supportnode.io.recording import (
 )
 from supportnode.msgs import Diagnostics, LatencyStats, PointCloud, decode_any, peek_header
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def as_bytes(frames) -> list[bytes]:

@@ -18,8 +18,8 @@ from supportnode.errors import CloudFormatError
 from supportnode.io import _lzf
 from supportnode.io.clouds import Cloud, read_cloud, write_cloud, write_pcd, write_ply
 
-DATA = Path(__file__).parent / "data"
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real_scans"
+DATA = Path(__file__).resolve().parents[1] / "data"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "real_scans"
 
 
 def _cloud(n: int = 50, seed: int = 0) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:

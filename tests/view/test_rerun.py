@@ -17,7 +17,7 @@ from supportnode.io.clouds import write_ply
 
 rr_chunk = pytest.importorskip("rerun.chunk")
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def entities(path: Path) -> dict[str, dict[str, list]]:

@@ -929,7 +929,7 @@ def test_worked_example_in_docs_matches_the_encoder():
     import re
     from pathlib import Path
 
-    text = (Path(__file__).resolve().parents[1] / "docs" / "protocol.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "docs" / "protocol.md").read_text()
     dump = text.split("## 10.")[1].split("```")[1]
     frames, current = [], None
     for line in dump.splitlines():
