@@ -21,7 +21,7 @@ from typing import Any, cast
 import numpy as np
 
 from supportnode.errors import CloudFormatError
-from supportnode.io import _las, _pcd, _ply, _text
+from supportnode.io import _las, _pcd, _pcd_write, _ply, _text
 from supportnode.io._common import RawCloud, combine_rgb, to_uint8_colour
 
 __all__ = ["Cloud", "read_cloud", "write_cloud", "write_pcd", "write_ply"]
@@ -281,7 +281,7 @@ def write_pcd(
     if "rgb" in flds and flds["rgb"].shape[1:] == (3,):
         flds["rgb"] = to_uint8_colour(flds["rgb"])
     try:
-        _pcd.write_pcd(Path(name), pts, flds, data, name)
+        _pcd_write.write_pcd(Path(name), pts, flds, data, name)
     except OSError as err:
         raise CloudFormatError(f"{name}: cannot write ({err.strerror or err})") from err
 
