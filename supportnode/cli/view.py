@@ -35,6 +35,7 @@ RESULT_TOPICS = ("surfaces", "obstacles", "diagnostics", "map")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The command's options (longer than ~60 lines: one declaration per option, read as a list)."""
     parser.add_argument(
         "source",
         nargs="?",
