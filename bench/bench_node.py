@@ -31,7 +31,7 @@ from supportnode.config import load_config
 from supportnode.errors import SupportNodeError
 from supportnode.msgs import PointCloud
 from supportnode.node.allocator import retain_freed_memory
-from supportnode.node.map import VoxelMap
+from supportnode.map import VoxelMap
 from supportnode.node.node import Node
 from supportnode.params import DetectParams
 from supportnode.sim import Lidar, load_scene, parse_scene, poses_for
@@ -133,7 +133,7 @@ def growth(sc, factor: int = 10) -> dict:
 
 
 def _base_voxels(sc) -> int:
-    from supportnode.node.map import VoxelMap
+    from supportnode.map import VoxelMap
 
     m = VoxelMap(PARAMS.node.map)
     for i, s in enumerate(sc):

@@ -462,7 +462,7 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
 def _slow_stages(monkeypatch, merge_s: float, detect_s: float) -> None:
     """Every merge into the map and every full detection take this much longer (s)."""
     from supportnode.node import incremental
-    from supportnode.node.map import VoxelMap
+    from supportnode.map import VoxelMap
 
     integrate, full = VoxelMap.integrate, incremental.full
 

@@ -71,7 +71,7 @@ from supportnode.node.gravity import SOURCES, Gravity, Verdict
 from supportnode.node.incremental import Items
 from supportnode.node.intake import BACKWARD_S, Intake, Reject, scan_problem
 from supportnode.node.latency import LatencyWindow, RateLimitedLog
-from supportnode.node.map import VoxelMap
+from supportnode.map import VoxelMap
 from supportnode.node.tracking import ClusterTracker, SurfaceTracker
 from supportnode.node.worker import DetectionWorker, WorkerError
 from supportnode.params import DetectParams
