@@ -23,8 +23,8 @@ import numpy as np
 
 from supportnode.errors import ProtocolError
 from supportnode.geometry.transform import quaternion_matrix
-from supportnode.msgs import Limits, PointCloud, SeqCounter, decode_any
 from supportnode.map import coordinate_range
+from supportnode.msgs import Limits, PointCloud, SeqCounter, decode_any
 from supportnode.params import NodeParams
 
 __all__ = [
