@@ -1,26 +1,22 @@
-"""Packed voxel key -> store slot: an open-addressing hash table in numpy arrays."""
+"""Packed voxel key -> store slot: an open-addressing hash table in numpy arrays, looked up
+by compiled code (`supportnode.kernels.voxelstore`, `supportnode.kernels.rays`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from supportnode.kernels.voxelstore import find_slots
 from supportnode.map.keys import _EMPTY, _GOLDEN, _TOMB
-
-_FILTER_BITS = 3  # KeyHash.filter has 2^3 cells per table position
 
 
 class KeyHash:
     """Packed voxel key -> slot, open addressing with linear probing in numpy arrays.
 
-    Every operation is vectorised over its queries; the Python loop runs once per probe step
-    (a handful at load <= 1/2). Deleted entries become tombstones; the table is rebuilt (O(size),
-    amortised over at least as many insertions) when entries plus tombstones pass half of it.
-
-    Alongside, ``filter`` counts the live keys per cell of a finer hash (2^_FILTER_BITS cells
-    per table position, uint8, saturating at 255: a saturated cell stays "maybe" until the next
-    rebuild). A zero cell proves a key absent: at 1/16 or less of the cells occupied it drops
-    most absent queries with one lookup, where the table itself leaves up to half of them to
-    probe on (:meth:`maybe_present`).
+    Lookups are compiled (one probe chain per query); insertion and deletion are vectorised
+    over their queries, the Python loop running once per probe step (a handful at load <=
+    1/2). Deleted entries become tombstones; the table is rebuilt (O(size), amortised over at
+    least as many insertions) when entries plus tombstones pass half of it, so a probe chain
+    always ends at an empty entry.
     """
 
     def __init__(self, capacity: int = 1 << 12) -> None:
@@ -32,24 +28,16 @@ class KeyHash:
         self.vals = np.zeros(capacity, dtype=np.int64)
         self.tombs = 0
         self._shift = np.uint64(64 - int(np.log2(capacity)))
-        self.filter = np.zeros(capacity << _FILTER_BITS, dtype=np.uint8)
-        self._fshift = np.uint64(64 - int(np.log2(capacity)) - _FILTER_BITS)
 
     @property
     def capacity(self) -> int:
         return len(self.keys)
 
-    def _home(self, q: np.ndarray, shift: np.uint64 | None = None) -> np.ndarray:
+    def _home(self, q: np.ndarray) -> np.ndarray:
         # Views, not copies: packed keys are non-negative and the shifted hash fits in int64.
         h = np.ascontiguousarray(q, dtype=np.int64).view(np.uint64) * _GOLDEN
-        h >>= self._shift if shift is None else shift
+        h >>= self._shift
         return h.view(np.int64)
-
-    def _count(self, q: np.ndarray, sign: int) -> None:
-        """Add ``sign`` (+-1) to the filter cells of (Q,) distinct packed keys."""
-        cells, n = np.unique(self._home(q, self._fshift), return_counts=True)
-        c = self.filter[cells].astype(np.int64)
-        self.filter[cells] = np.where(c == 255, 255, np.clip(c + sign * n, 0, 255))
 
     def _locate(self, q: np.ndarray) -> np.ndarray:
         """Table position of each (Q,) packed key, -1 where absent."""
@@ -72,34 +60,7 @@ class KeyHash:
 
     def find(self, q: np.ndarray) -> np.ndarray:
         """Slot of each (Q,) packed key, -1 where absent."""
-        pos = self._locate(q)
-        return np.where(pos >= 0, self.vals[np.maximum(pos, 0)], -1)
-
-    def maybe_present(self, q: np.ndarray) -> np.ndarray:
-        """Indices into (Q,) packed keys of those that may be present (the others are not):
-        one lookup in ``filter`` per query, for many queries of which few are present (ray
-        samples in free space); :meth:`find_present` settles the rest."""
-        # Compared to zero first: numpy finds the nonzero entries of bool 5x faster than uint8.
-        return np.flatnonzero(np.take(self.filter, self._home(q, self._fshift)) != 0)
-
-    def find_present(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Indices into (Q,) packed keys of those present, ascending, and their slots.
-
-        Unlike :meth:`find`, no (Q,) result: suits queries of which few are present."""
-        idx = np.arange(len(q))
-        pos = self._home(q)
-        mask = self.capacity - 1
-        hits, hit_pos = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
-        while idx.size:
-            k = np.take(self.keys, pos)
-            hit = k == q[idx]
-            hits.append(idx[hit])
-            hit_pos.append(pos[hit])
-            go_on = ~hit & (k != _EMPTY)  # tombstones do not end a probe chain
-            idx, pos = idx[go_on], (pos[go_on] + 1) & mask
-        found, at = np.concatenate(hits), np.concatenate(hit_pos)
-        order = np.argsort(found, kind="stable")
-        return found[order], self.vals[at[order]]
+        return find_slots(self.keys, self.vals, int(self._shift), q)
 
     def insert(self, q: np.ndarray, vals: np.ndarray) -> None:
         """Insert (Q,) distinct packed keys that are not in the table, with their slots."""
@@ -122,12 +83,10 @@ class KeyHash:
             idx = np.concatenate([idx[~free], ci[~won]])
             pos = (np.concatenate([pos[~free], cp[~won]]) + 1) & mask
         self.size += len(q)
-        self._count(q, 1)
 
     def delete(self, q: np.ndarray) -> None:
         """Remove (Q,) distinct packed keys that are in the table."""
         pos = self._locate(q)
-        self._count(q[pos >= 0], -1)
         pos = pos[pos >= 0]
         self.keys[pos] = _TOMB
         self.size -= len(pos)
