@@ -16,13 +16,14 @@ import numpy as np
 from numba import njit
 
 from supportnode.kernels.runtime import warmer
-from supportnode.kernels.voxelstore import EMPTY, _check_table, _home, _lookup
+from supportnode.kernels.voxelstore import EMPTY, _block_bit, _check_table, _lookup
 
 __all__ = ["ray_voxels"]
 
 
 @njit(cache=True, nogil=True)
-def _ray_voxels(origin, u, n, size, keys, vals, shift, offs, shifts, last_scan, scan):
+def _ray_voxels(origin, u, n, size, keys, vals, shift, bits, offs, shifts, last_scan, scan):
+    bshift = 64 - int(np.log2(bits.size * 8))
     total = 0
     for r in range(n.size):
         total += n[r]
@@ -33,19 +34,18 @@ def _ray_voxels(origin, u, n, size, keys, vals, shift, offs, shifts, last_scan, 
         prev = -1
         for j in range(n[r]):
             t = (j + 0.5) * size
-            packed = 0
-            inside = True
-            for a in range(3):
-                k = math.floor((t * u[r, a] + origin[a]) / size) + offs[a]
-                if k < 0 or k >= 2 * offs[a]:
-                    inside = False
-                packed |= int(k) << shifts[a]
+            fx = math.floor((t * u[r, 0] + origin[0]) / size) + offs[0]
+            fy = math.floor((t * u[r, 1] + origin[1]) / size) + offs[1]
+            fz = math.floor((t * u[r, 2] + origin[2]) / size) + offs[2]
+            inside = 0 <= fx < 2 * offs[0] and 0 <= fy < 2 * offs[1] and 0 <= fz < 2 * offs[2]
+            packed = (fx << shifts[0]) | (fy << shifts[1]) | (fz << shifts[2])
             if not inside or packed == prev:
                 prev = packed if inside else -1
                 continue
             prev = packed
-            if keys[_home(packed, shift)] == EMPTY:
-                continue  # most samples: free space, one probe
+            b = _block_bit(fx, fy, fz, shifts, bshift)
+            if not (bits[b >> 3] >> (b & 7)) & 1:
+                continue  # most samples: free space, no table access
             s = _lookup(keys, vals, shift, packed)
             if s < 0 or last_scan[s] == scan:  # absent, or hit by this scan: seen, kept
                 continue
@@ -70,7 +70,7 @@ def ray_voxels(
     u: np.ndarray,
     n: np.ndarray,
     size: float,
-    table: tuple[np.ndarray, np.ndarray, int],
+    table: tuple[np.ndarray, np.ndarray, int, np.ndarray],
     offs: np.ndarray,
     shifts: np.ndarray,
     last_scan: np.ndarray,
@@ -80,7 +80,8 @@ def ray_voxels(
     pass through and that scan number ``scan`` did not hit (``last_scan[slot] != scan``).
 
     origin (3,) metres; u (R, 3) unit directions; n (R,) int64 samples per ray; size: voxel
-    edge, metres; table: (keys, vals, shift) of the key table; offs, shifts (3,) int64: the
+    edge, metres; table: (keys, vals, shift, block bitmap) of the key table
+    (`supportnode.map.hash.KeyHash.table`); offs, shifts (3,) int64: the
     key packing; last_scan (S,) int64 per store slot. Finite input only."""
     origin = np.ascontiguousarray(origin, dtype=np.float64).reshape(3)
     u = np.ascontiguousarray(u, dtype=np.float64).reshape(-1, 3)
@@ -93,13 +94,15 @@ def ray_voxels(
         raise ValueError(f"voxel size must be positive and finite, got {size}")
     if len(n) and n.min() < 0:
         raise ValueError("sample counts must be >= 0")
-    keys, vals, shift = table
+    keys, vals, shift, bits = table
     shift = _check_table(keys, vals, shift)
+    if bits.dtype != np.uint8 or bits.size == 0 or bits.size & (bits.size - 1):
+        raise ValueError("the block bitmap must be a non-empty uint8 array of 2^k bytes")
     offs = np.ascontiguousarray(offs, dtype=np.int64).reshape(3)
     shifts = np.ascontiguousarray(shifts, dtype=np.int64).reshape(3)
     last_scan = np.ascontiguousarray(last_scan, dtype=np.int64)
     return _ray_voxels(
-        origin, u, n, float(size), keys, vals, shift, offs, shifts, last_scan, int(scan)
+        origin, u, n, float(size), keys, vals, shift, bits, offs, shifts, last_scan, int(scan)
     )
 
 
@@ -111,7 +114,7 @@ def _warm() -> None:
         np.array([[1.0, 0.0, 0.0]]),
         np.array([3]),
         0.05,
-        (keys, np.zeros(16, np.int64), 60),
+        (keys, np.zeros(16, np.int64), 60, np.zeros(4, np.uint8)),
         np.array([1 << 21, 1 << 21, 1 << 18]),
         np.array([41, 19, 0]),
         np.zeros(4, np.int64),

@@ -53,11 +53,9 @@ class Clearing:
         u = d / dist[:, None]
         # The stored voxels the rays pass through and this scan did not hit (those it hit
         # are seen, not seen through), each (ray, voxel) once: compiled (kernels.rays).
-        h = self._hash
         ray, slot = ray_voxels(
-            origin, u, n, size, (h.keys, h.vals, int(h._shift)), _OFFS, _SHIFT_ARR,
-            self._last_scan, self._scans,
-        )  # fmt: skip
+            origin, u, n, size, self._hash.table, _OFFS, _SHIFT_ARR, self._last_scan, self._scans
+        )
         if len(slot) == 0:
             return np.zeros((0, 3), np.int64)
 

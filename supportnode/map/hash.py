@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from supportnode.kernels.voxelstore import find_slots
-from supportnode.map.keys import _EMPTY, _GOLDEN, _TOMB
+from supportnode.kernels.voxelstore import find_slots, mark_blocks
+from supportnode.map.keys import _EMPTY, _GOLDEN, _OFFS, _SHIFTS, _TOMB
+
+_SHIFT_ARR = np.array(_SHIFTS, np.int64)
+_MASKS = 2 * _OFFS - 1  # each packed field's mask (its width is that of 2 * offset)
 
 
 class KeyHash:
@@ -28,6 +31,8 @@ class KeyHash:
         self.vals = np.zeros(capacity, dtype=np.int64)
         self.tombs = 0
         self._shift = np.uint64(64 - int(np.log2(capacity)))
+        # Occupied blocks of voxels, two bits per entry (`kernels.voxelstore.mark_blocks`).
+        self.blocks = np.zeros(max(capacity // 4, 8), dtype=np.uint8)
 
     @property
     def capacity(self) -> int:
@@ -58,6 +63,11 @@ class KeyHash:
             idx, pos = idx[go_on], (pos[go_on] + 1) & mask
         return out
 
+    @property
+    def table(self) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+        """(keys, vals, shift, block bitmap): what the compiled lookups take."""
+        return self.keys, self.vals, int(self._shift), self.blocks
+
     def find(self, q: np.ndarray) -> np.ndarray:
         """Slot of each (Q,) packed key, -1 where absent."""
         return find_slots(self.keys, self.vals, int(self._shift), q)
@@ -83,6 +93,7 @@ class KeyHash:
             idx = np.concatenate([idx[~free], ci[~won]])
             pos = (np.concatenate([pos[~free], cp[~won]]) + 1) & mask
         self.size += len(q)
+        mark_blocks(self.blocks, q, _SHIFT_ARR, _MASKS)
 
     def delete(self, q: np.ndarray) -> None:
         """Remove (Q,) distinct packed keys that are in the table."""

@@ -130,9 +130,7 @@ def test_ray_voxels_matches_a_per_sample_reference(n_rays, n_vox, size, far, see
     slots = np.arange(len(keys), dtype=np.int64)
     last_scan = rng.integers(0, 3, len(keys)).astype(np.int64)
     h = _table(pack_keys(keys), slots)
-    rays, got = ray_voxels(
-        origin, u, n, size, (h.keys, h.vals, int(h._shift)), _OFFS, _SHIFT_ARR, last_scan, 2
-    )
+    rays, got = ray_voxels(origin, u, n, size, h.table, _OFFS, _SHIFT_ARR, last_scan, 2)
     stored = {tuple(k): int(s) for k, s in zip(keys.tolist(), slots, strict=True)}
     want = _reference_march(origin, u, n, size, stored, last_scan, 2)
     pairs = list(zip(rays.tolist(), got.tolist(), strict=True))
@@ -142,7 +140,7 @@ def test_ray_voxels_matches_a_per_sample_reference(n_rays, n_vox, size, far, see
 
 def test_ray_voxels_empty_and_bad_input():
     h = _table(np.zeros(0, np.int64), np.zeros(0, np.int64))
-    table = (h.keys, h.vals, int(h._shift))
+    table = h.table
     rays, slots = ray_voxels(
         np.zeros(3), np.zeros((0, 3)), np.zeros(0), 0.05, table, _OFFS, _SHIFT_ARR,
         np.zeros(0, np.int64), 1,
