@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import re
 import statistics
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -44,3 +47,28 @@ def _fmt(v: object) -> str:
     if isinstance(v, (int, np.integer)):
         return f"{v:,}"
     return str(v)
+
+
+def write_docs_block(path: Path, name: str, text: str, command: str, load: str) -> None:
+    """Replace the block between ``<!-- name: begin -->`` and ``<!-- name: end -->`` in ``path``
+    with ``text`` (a table, fenced), the command that produced it and the host's load; the
+    block is appended when the file does not hold it yet. Docs hold current figures only."""
+    begin, end = f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
+    block = f"{begin}\n`{command}` (host load {load}):\n\n```\n{text}\n```\n{end}"
+    doc = path.read_text(encoding="utf-8") if path.exists() else ""
+    pattern = re.compile(f"{re.escape(begin)}.*?{re.escape(end)}", re.S)
+    if pattern.search(doc):
+        doc = pattern.sub(lambda _: block, doc)
+    else:
+        doc = doc.rstrip("\n") + ("\n\n" if doc else "") + block + "\n"
+    path.write_text(doc, encoding="utf-8")
+
+
+def docs_command(script: str, argv: list[str]) -> str:
+    """The command line that reproduces a run, without ``--docs``."""
+    return " ".join(["python", f"bench/{script}", *(a for a in argv if a != "--docs")])
+
+
+def host_load(start: tuple[float, float, float]) -> str:
+    """'A (1 min) at the start, B at the end' from ``os.getloadavg()`` taken at the start."""
+    return f"{start[0]:.1f} (1 min) at the start, {os.getloadavg()[0]:.1f} at the end"

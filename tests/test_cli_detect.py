@@ -197,6 +197,9 @@ def test_sensor_origin_drops_undersides_and_rejects_bad_values(table_cloud, tmp_
     assert main([*args, "--sensor-origin", "0,0,0.5"]) == 0  # below the table: only the floor
     heights = [s["height"] for s in json.loads((out / "result.json").read_text())["surfaces"]]
     assert heights == [pytest.approx(0.0)]
+    # A coordinate list starting with a minus is a value, not an option.
+    assert main([*args, "--sensor-origin", "-0.5,0,0.5"]) == 0
+    assert len(json.loads((out / "result.json").read_text())["surfaces"]) == 1
     with pytest.raises(SystemExit) as exit_info:
         main([*args, "--sensor-origin", "0,0"])
     assert exit_info.value.code == 2

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import re
 import struct
-import time
 from pathlib import Path
 
 import lzf_reference
@@ -286,15 +285,12 @@ def test_real_binary_compressed_kinect_frame() -> None:
     path = REAL / "table_scene_mug_stereo_textured.pcd"
     if not path.exists():
         pytest.skip(f"{path} not present")
-    start = time.perf_counter()
-    cloud = read_cloud(path)
-    elapsed = time.perf_counter() - start
+    cloud = read_cloud(path)  # its speed is bench/bench_io.py's business, not a test's
     assert (cloud.width, cloud.height, cloud.input_count) == (640, 480, 307200)
     assert 200_000 < len(cloud) < 220_000
     assert len(cloud) + cloud.dropped_nonfinite == 307200
     assert cloud.fields["rgb"].shape == (len(cloud), 3)
     assert 0.3 < float(np.median(cloud.points[:, 2])) < 3.0  # metres in front of the camera
-    assert elapsed < 2.0
 
 
 # -------------------------------------------------------------------------- text, numpy, OBJ

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 from collections.abc import Sequence
 
@@ -78,8 +79,23 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+# "-0.6,0,1.2": a coordinate list starting with a minus, which argparse takes for an option.
+_NEGATIVE_LIST = re.compile(r"^-[\d.][\d.eE+-]*(,\s*-?[\d.][\d.eE+-]*)+$")
+
+
+def _join_negative_lists(argv: list[str]) -> list[str]:
+    """``--sensor-origin -0.6,0,1.2`` as ``--sensor-origin=-0.6,0,1.2`` (what argparse needs)."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and _NEGATIVE_LIST.match(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _join_negative_lists(list(sys.argv[1:] if argv is None else argv))
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)
     args = parser.parse_args(argv)

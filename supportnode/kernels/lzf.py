@@ -29,8 +29,9 @@ _MESSAGES = {
 def _decompress(src: np.ndarray, out: np.ndarray) -> int:
     n_in = src.size
     size = out.size
-    ip = 0
-    op = 0
+    # int64 throughout: numba types a variable once, and the stream's bytes are uint8
+    ip = np.int64(0)
+    op = np.int64(0)
     while ip < n_in:
         ctrl = np.int64(src[ip])
         ip += 1
@@ -58,7 +59,7 @@ def _decompress(src: np.ndarray, out: np.ndarray) -> int:
         for k in range(length):
             out[op + k] = out[ref + k]
         op += length
-    return op
+    return int(op)
 
 
 def lzf_decompress(data: bytes | bytearray | memoryview | np.ndarray, size: int) -> np.ndarray:

@@ -144,9 +144,9 @@ class SimCloud:
             "supported_by": self.supported_by,
             "support_surface": self.support_surface,
             "sensor_pose": self.sensor_pose,
-            "stamp": np.float64(self.stamp),
+            "stamp": np.array(self.stamp, dtype=np.float64),
             "tilt_rotation": self.tilt_rotation,
-            "frame": np.str_(self.frame),
+            "frame": np.array(self.frame),
         }
 
 

@@ -72,7 +72,7 @@ def parse_noise(specs: Iterable[str]) -> NoiseSpec:
             raise ConfigError(f"noise {text!r}: expected one non-negative number")
         if kind == "outliers" and numbers[0] > 1:
             raise ConfigError(f"noise {text!r}: the outlier fraction must be in [0, 1]")
-        spec = replace(spec, **{kind: numbers[0]})
+        spec = replace(spec, **{kind: numbers[0]})  # type: ignore[arg-type]  # kind is a float field
     return spec
 
 

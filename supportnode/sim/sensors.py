@@ -90,8 +90,7 @@ def sample_scene(
         others = [scene.primitives[i] for i in np.flatnonzero(meets)]
         blockers.append(others)
         visible.append(_visible(others, probe).mean())
-    visible = np.array(visible)
-    areas = np.array([f.area for _, f in faces]) * visible
+    areas = np.array([f.area for _, f in faces]) * np.array(visible)
     counts = rng.multinomial(n_points, areas / areas.sum()) if areas.sum() > 0 else 0 * areas
     table = scene.label_table()
     out = empty_cloud(n_points)
