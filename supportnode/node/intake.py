@@ -74,7 +74,7 @@ class Reject:
 
 def scan_problem(cloud: PointCloud, limit: np.ndarray) -> Reject | None:
     """What makes a decoded scan unusable on its own, or None. limit: (3,) metres, the map's
-    coordinate range (`supportnode.node.map.coordinate_range`)."""
+    coordinate range (`supportnode.map.coordinate_range`)."""
     if cloud.count == 0:
         if cloud.dropped_nonfinite:
             text = f"all {cloud.dropped_nonfinite} points have a NaN/Inf coordinate"
