@@ -402,7 +402,7 @@ def docs_text(st: dict, pooled: dict, noise: float) -> str:
     from common import table
 
     rows = [
-        [label, st["stages"][k]["p50_ms"], st["stages"][k]["p99_ms"]]
+        [label, f"{st['stages'][k]['p50_ms']:.1f}", f"{st['stages'][k]['p99_ms']:.1f}"]
         for label, k in _STAGE_ROWS
         if k in st["stages"]
     ]
@@ -412,9 +412,9 @@ def docs_text(st: dict, pooled: dict, noise: float) -> str:
     s, o = pooled["surfaces"] or {}, pooled["obstacles"] or {}
     sent = pooled["sent"]
     e2e_rows = [
-        ["surfaces p50, ms", s.get("p50_ms"), f"<= {tgt[0]}"],
-        ["surfaces p99, ms", s.get("p99_ms"), f"<= {tgt[1]}"],
-        ["obstacles p50, ms", o.get("p50_ms"), "<= 80"],
+        ["surfaces p50, ms", f"{s.get('p50_ms', float('nan')):.1f}", f"<= {tgt[0]}"],
+        ["surfaces p99, ms", f"{s.get('p99_ms', float('nan')):.1f}", f"<= {tgt[1]}"],
+        ["obstacles p50, ms", f"{o.get('p50_ms', float('nan')):.1f}", "<= 80"],
         [
             "scans detected per run",
             " ".join(f"{d}/{sent}" for d in pooled["detected"]),
