@@ -29,7 +29,7 @@ GOLDEN = 0x9E3779B97F4A7C15
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _home(key: int, shift: int) -> int:
+def _home(key: int, shift: int):
     # All in uint64 (mixing it with int64 makes float64 in numba), then back to int64.
     return int64((uint64(key) * uint64(GOLDEN)) >> uint64(shift))
 

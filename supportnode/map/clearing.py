@@ -7,11 +7,12 @@ import numpy as np
 from supportnode.kernels.rays import ray_voxels
 from supportnode.map.keys import _OFFS, _SHIFTS, pack_keys
 from supportnode.map.scan import _plane_fits
+from supportnode.map.state import StoreState
 
 _SHIFT_ARR = np.array(_SHIFTS, np.int64)
 
 
-class Clearing:
+class Clearing(StoreState):
     """Mixin of `VoxelMap`: ray clearing."""
 
     def _clear(self, cols: list[np.ndarray], origin: np.ndarray) -> np.ndarray:

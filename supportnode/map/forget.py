@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.map.state import StoreState
 
-class Forgetting:
+
+class Forgetting(StoreState):
     """Mixin of `VoxelMap`: the radius, age and cap pass."""
 
     def _maybe_forget(self, stamp: float, origin: np.ndarray) -> np.ndarray:

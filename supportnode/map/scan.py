@@ -8,6 +8,7 @@ import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
 from supportnode.geometry.voxels import OUTER_INDEX, argsort_keys, voxelize
+from supportnode.map.state import StoreState
 
 # The noise floor of a scan: this percentile of its dense voxels' own estimates (see
 # _plane_noise).
@@ -79,11 +80,8 @@ class _ScanGrid(NamedTuple):
         return self.moments[:, 3:]
 
 
-class ScanVoxelizer:
+class ScanVoxelizer(StoreState):
     """Mixin of `VoxelMap`: a scan's voxels in scratch buffers kept across scans."""
-
-    size: float
-    _buffers: dict[str, np.ndarray]
 
     def _buffer(self, name: str, n: int, dtype: type) -> np.ndarray:
         """(n,) scratch array kept across scans: contents undefined, except that a new one

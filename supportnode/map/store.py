@@ -208,9 +208,6 @@ class VoxelMap(Merging, Clearing, Forgetting):
 
     # ----------------------------------------------------------------- public
 
-    def __len__(self) -> int:
-        return self._hash.size
-
     def integrate(
         self,
         points: np.ndarray,

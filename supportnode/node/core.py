@@ -220,6 +220,15 @@ class NodeCore:
             timings=timings,
         )
 
+    def map_cloud(self, max_points: int, seq: int) -> PointCloud | None:
+        """The map as a PointCloud in the results' frame: one point per voxel (its points'
+        mean; at most ``max_points``, every k-th); None before the first scan."""
+        if self.last_stamp is None or not hasattr(self.map, "centroids"):
+            return None
+        pts = transform_points(self.map.centroids(max_points), self.gravity.rotation)
+        frame = self.cfg.frame_id if self.posed else self.frame
+        return PointCloud.from_xyz(pts.astype(np.float32), self.last_stamp, frame, seq)
+
     def _gravity_verdict(self, cloud: PointCloud, verdict: Verdict) -> None:
         """Count a scan's gravity outlier; log the first one and every new up adopted."""
         if verdict is Verdict.OUTLIER:

@@ -36,13 +36,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 import zmq
 
 from supportnode import bus
 from supportnode._closing import Closing
 from supportnode.errors import InputError, SupportNodeError
-from supportnode.geometry.transform import quaternion_matrix, transform_points
+from supportnode.geometry.transform import quaternion_matrix
 from supportnode.msgs import Diagnostics, PointCloud
 from supportnode.node.admission import Admission
 from supportnode.node.core import Job, MapLike, NodeCore, NodeOutput
@@ -123,10 +122,6 @@ class Node(Closing):
         return self._rejects.counts()
 
     @property
-    def last_reject(self) -> str:
-        return self._rejects.last
-
-    @property
     def counters(self) -> dict[str, int]:
         """Both sides' counters, copied (what Diagnostics reports, without the map's)."""
         c = {
@@ -204,13 +199,11 @@ class Node(Closing):
         return self._sockets.pub
 
     @property
-    def pub_endpoint(self) -> str:
-        """Resolved result endpoint (the real port after binding ``tcp://host:*``)."""
+    def pub_endpoint(self) -> str:  # resolved: the real port after binding tcp://host:*
         return self._sockets.pub_endpoint
 
     @property
-    def scan_endpoint(self) -> str:
-        """Resolved scan endpoint."""
+    def scan_endpoint(self) -> str:  # resolved
         return self._sockets.scan_endpoint
 
     def stop(self) -> None:
@@ -382,15 +375,11 @@ class Node(Closing):
         return msg
 
     def map_cloud(self) -> PointCloud | None:
-        """The map as a PointCloud: one point per voxel (its points' mean, at most
-        MAP_MAX_POINTS), in the results' frame; None before the first scan. Receiving side."""
-        core = self.core
-        if core.last_stamp is None or not hasattr(core.map, "centroids"):
-            return None
-        pts = transform_points(core.map.centroids(MAP_MAX_POINTS), core.gravity.rotation)
-        frame = self.cfg.frame_id if core.posed else core.frame
-        self._map_seq += 1
-        return PointCloud.from_xyz(pts.astype(np.float32), core.last_stamp, frame, self._map_seq)
+        """The map as a PointCloud (`NodeCore.map_cloud`, at most MAP_MAX_POINTS); None
+        before the first scan. Receiving side."""
+        msg = self.core.map_cloud(MAP_MAX_POINTS, self._map_seq + 1)
+        self._map_seq += msg is not None
+        return msg
 
     def publish_map(self) -> PointCloud | None:
         """Send `map_cloud` on ``node.map_topic`` (sockets must be open); returns it."""
