@@ -566,7 +566,7 @@ def main() -> None:
         ap.error(f"--noise: expected a finite number >= 0, got {args.noise}")
     if not args.default_malloc:
         retain_freed_memory()  # as `supportnode run` does
-    parts = set(args.only.split(",")) | ({"stages", "e2e"} if args.docs else set())
+    parts = {p for p in args.only.split(",") if p} | ({"stages", "e2e"} if args.docs else set())
     load0 = os.getloadavg()
     unknown = parts - {"stages", "e2e", "standing", "growth", "rate", "ids"}
     if unknown:
