@@ -18,7 +18,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import table
 
-from supportnode.node.map import VoxelMap
+from supportnode.map import VoxelMap
 from supportnode.node.tracking import ClusterTracker, SurfaceTracker
 from supportnode.params import MapParams
 

@@ -4,6 +4,7 @@ drops and memory at twice the input rate, accuracy and id switches on simulated 
     python bench/bench_node.py [--scene kitchen] [--frames 30] [--lidar os128|vlp16]
                                [--only stages,e2e,standing,growth,rate,ids]
                                [--map-points recent] [--in-process] [--set KEY=VALUE ...]
+                               [--runs 3] [--docs] [--soak MIN]
 
 Prints one JSON object per part. The lidar is the simulator's os128 (128 x 1024 = 131,072
 rays; a scan holds as many points as rays hit something).
@@ -22,16 +23,23 @@ import sys
 import threading
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 import supportnode
-from supportnode.client import Publisher, Subscriber, SupportSurfaces, pose_from_matrix
+from supportnode.client import (
+    ObstacleClusters,
+    Publisher,
+    Subscriber,
+    SupportSurfaces,
+    pose_from_matrix,
+)
 from supportnode.config import load_config
 from supportnode.errors import SupportNodeError
+from supportnode.map import VoxelMap
 from supportnode.msgs import PointCloud
 from supportnode.node.allocator import retain_freed_memory
-from supportnode.node.map import VoxelMap
 from supportnode.node.node import Node
 from supportnode.params import DetectParams
 from supportnode.sim import Lidar, load_scene, parse_scene, poses_for
@@ -133,7 +141,7 @@ def growth(sc, factor: int = 10) -> dict:
 
 
 def _base_voxels(sc) -> int:
-    from supportnode.node.map import VoxelMap
+    from supportnode.map import VoxelMap
 
     m = VoxelMap(PARAMS.node.map)
     for i, s in enumerate(sc):
@@ -147,15 +155,17 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-def _drive(sc, endpoint: str, rate: float, go) -> None:
+def _drive(sc, endpoint: str, rate: float, go, total: int | None = None) -> None:
     """A lidar driver in its own process: publishes the scans at ``rate`` Hz, each stamped
     with the wall clock when it is sent (the subscriber measures against it: the same clock
-    in every process of the machine)."""
+    in every process of the machine); ``total`` scans (the sequence over and over), default
+    the sequence once."""
     pub = Publisher(endpoint, "scan", hwm=2)
     clouds = [_cloud(s, 0.0, 0) for s in sc]  # the poses; stamps and seqs are set per send
     go.wait()
     t0 = time.monotonic()
-    for i, c in enumerate(clouds):
+    for i in range(total or len(clouds)):
+        c = clouds[i % len(clouds)]
         pub.publish(dataclasses.replace(c, stamp=time.time(), seq=i + 1))
         time.sleep(max(t0 + (i + 1) / rate - time.monotonic(), 0.0))
     time.sleep(1.0)
@@ -192,8 +202,9 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0, in_process: bool = False) -
         cwd=SOURCE,
         env={**os.environ, "PYTHONPATH": path},
     )
-    sub = Subscriber(["surfaces", "diagnostics"], pub_ep, keep_newest=100)
+    sub = Subscriber(["surfaces", "obstacles", "diagnostics"], pub_ep, keep_newest=100)
     lat: list[tuple[float, float]] = []
+    lat_o: list[float] = []
     diags = []
     try:
         time.sleep(3.0)  # the node's imports, then the subscriptions (ZeroMQ's slow joiner)
@@ -206,6 +217,8 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0, in_process: bool = False) -
                 lat.append((msg.stamp, time.time() - msg.stamp))
                 if slow_consumer:
                     time.sleep(slow_consumer)
+            elif isinstance(msg, ObstacleClusters):
+                lat_o.append(time.time() - msg.stamp)
             elif msg is not None:
                 diags.append((time.monotonic() - t0, msg))
     finally:
@@ -217,17 +230,15 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0, in_process: bool = False) -
     part = span / parts
     rss = [
         max(
-            # the node's process and its detection worker's
-            (
-                d.gauges["rss_mb"] + d.gauges.get("rss_mb_worker", 0.0)
-                for t, d in diags
-                if k * part <= t < (k + 1) * part
-            ),
+            (d.gauges["rss_mb"] for t, d in diags if k * part <= t < (k + 1) * part),
             default=float("nan"),
         )
         for k in range(parts)
     ]
-    return _e2e_summary(rate, len(sc), last, lat, rss, "process")
+    out = _e2e_summary(rate, len(sc), last, lat, rss, "process")
+    out["obstacles_latency"] = _pct(lat_o) if lat_o else None
+    out["_samples"] = {"surfaces": [x for _, x in lat], "obstacles": lat_o}
+    return out
 
 
 # Latencies of scans published this long after the first one are the steady state: the
@@ -308,6 +319,114 @@ def _e2e_in_process(sc, rate: float, slow_consumer: float = 0.0) -> dict:
     pub.close()
     sub.close()
     return _e2e_summary(rate, n, d, lat, rss, "thread")
+
+
+def soak(sc, minutes: float, rate: float) -> dict:
+    """``supportnode run`` fed the moving sequence over and over at ``rate`` Hz for
+    ``minutes``: its resident memory (diagnostics' rss_mb) after the first minute and at the
+    end, and the growth between them (target: < 5 %)."""
+    scan_ep, pub_ep = (f"tcp://127.0.0.1:{_free_port()}" for _ in range(2))
+    ctx = mp.get_context("fork")
+    go = ctx.Event()
+    total = int(minutes * 60 * rate)
+    driver = ctx.Process(target=_drive, args=(sc, scan_ep, rate, go, total), daemon=True)
+    driver.start()
+    sets = [*SETS, f"node.scan_endpoint={scan_ep}", f"node.pub_endpoint={pub_ep}"]
+    path = os.pathsep.join(p for p in (SOURCE, os.environ.get("PYTHONPATH")) if p)
+    node = subprocess.Popen(
+        [sys.executable, "-m", "supportnode", "run", "--log-level", "WARNING"]
+        + [a for kv in sets for a in ("--set", kv)],
+        cwd=SOURCE,
+        env={**os.environ, "PYTHONPATH": path},
+    )
+    sub = Subscriber("diagnostics", pub_ep, keep_newest=10)
+    rss: list[tuple[float, float]] = []
+    last = None
+    try:
+        time.sleep(3.0)
+        go.set()
+        t0 = time.monotonic()
+        while time.monotonic() < t0 + total / rate + 2.0:
+            msg = sub.recv(0.5)
+            if msg is not None:
+                rss.append((time.monotonic() - t0, msg.gauges["rss_mb"]))
+                last = msg
+    finally:
+        node.terminate()
+        node.wait(10)
+        driver.join(10)
+        sub.close()
+    first = [r for t, r in rss if 60.0 <= t < 70.0] or [rss[0][1]]
+    end = [r for _, r in rss[-10:]]
+    c = last.counters if last is not None else {}
+    return {
+        "minutes": minutes,
+        "rate_hz": rate,
+        "scans_sent": total,
+        "processed": c.get("scans_processed"),
+        "detections": c.get("detections"),
+        "rss_mb_after_1min": round(float(np.median(first)), 1),
+        "rss_mb_end": round(float(np.median(end)), 1),
+        "rss_growth_pct": round(float(100 * (np.median(end) / np.median(first) - 1)), 2),
+    }
+
+
+def _pooled(runs: list[dict]) -> dict:
+    """p50/p99 over the scans of all e2e runs, and each run's detected count."""
+    s = [x for r in runs for x in r["_samples"]["surfaces"]]
+    o = [x for r in runs for x in r["_samples"]["obstacles"]]
+    return {
+        "runs": len(runs),
+        "surfaces": _pct(s) if s else None,
+        "obstacles": _pct(o) if o else None,
+        "detected": [r["surfaces_received"] for r in runs],
+        "skipped": [r["detections_skipped"] for r in runs],
+        "sent": runs[0]["scans_sent"],
+    }
+
+
+_STAGE_ROWS = (
+    ("merge (map)", "map"),
+    ("map points", "points"),
+    ("surfaces", "surfaces"),
+    ("objects", "objects"),
+    ("free space", "free_space"),
+    ("ids (tracking)", "track"),
+    ("messages", "messages"),
+    ("scan -> results, in process", "total"),
+)
+
+
+def docs_text(st: dict, pooled: dict, noise: float) -> str:
+    """The docs block: in-process stages, then end to end over sockets against the targets."""
+    from common import table
+
+    rows = [
+        [label, f"{st['stages'][k]['p50_ms']:.1f}", f"{st['stages'][k]['p99_ms']:.1f}"]
+        for label, k in _STAGE_ROWS
+        if k in st["stages"]
+    ]
+    out = [f"stages, in process ({st['points']:,} points a scan), ms", ""]
+    out.append(table(rows, ["stage", "p50", "p99"]))
+    tgt = ("70", "140") if noise > 0 else ("50", "100")
+    s, o = pooled["surfaces"] or {}, pooled["obstacles"] or {}
+    sent = pooled["sent"]
+    e2e_rows = [
+        ["surfaces p50, ms", f"{s.get('p50_ms', float('nan')):.1f}", f"<= {tgt[0]}"],
+        ["surfaces p99, ms", f"{s.get('p99_ms', float('nan')):.1f}", f"<= {tgt[1]}"],
+        ["obstacles p50, ms", f"{o.get('p50_ms', float('nan')):.1f}", "<= 80"],
+        [
+            "scans detected per run",
+            " ".join(f"{d}/{sent}" for d in pooled["detected"]),
+            f">= {int(0.95 * sent)}/{sent}",
+        ],
+        ["skipped for a newer scan", " ".join(map(str, pooled["skipped"])), "rare"],
+    ]
+    head = f"end to end over sockets, `supportnode run` in its own process, {pooled['runs']} runs"
+    if noise > 0:
+        head += f", {noise * 100:g} cm gaussian noise"
+    out += ["", head, "", table(e2e_rows, ["what", "measured", "target"])]
+    return "\n".join(out)
 
 
 def ids(scene_name: str, frames: int, map_points: str = "stable") -> dict:
@@ -416,6 +535,19 @@ def main() -> None:
         action="store_true",
         help="leave glibc's allocator as it is (supportnode run keeps freed memory)",
     )
+    ap.add_argument("--runs", type=int, default=1, help="e2e: runs, pooled into one p50/p99")
+    ap.add_argument(
+        "--docs",
+        action="store_true",
+        help="write the stage and end-to-end table into docs/performance.md (runs stages, e2e)",
+    )
+    ap.add_argument(
+        "--soak",
+        type=float,
+        default=0.0,
+        metavar="MIN",
+        help="also run the node MIN minutes at 20 Hz and report its memory growth",
+    )
     ap.add_argument(
         "--set",
         action="append",
@@ -434,7 +566,8 @@ def main() -> None:
         ap.error(f"--noise: expected a finite number >= 0, got {args.noise}")
     if not args.default_malloc:
         retain_freed_memory()  # as `supportnode run` does
-    parts = set(args.only.split(","))
+    parts = {p for p in args.only.split(",") if p} | ({"stages", "e2e"} if args.docs else set())
+    load0 = os.getloadavg()
     unknown = parts - {"stages", "e2e", "standing", "growth", "rate", "ids"}
     if unknown:
         ap.error(f"--only: unknown part(s) {', '.join(sorted(unknown))}")
@@ -442,15 +575,30 @@ def main() -> None:
     lidar = Lidar.preset(args.lidar)
     noise = NoiseSpec(gauss=args.noise)
     sc = scans(scene, lidar, poses_for(scene, args.frames), seed=0, noise=noise, frame="sensor")
+    st = None
     if "stages" in parts:
-        print(json.dumps({"stages": stages(sc)}), flush=True)
-    if parts & {"e2e", "rate"}:
+        st = stages(sc)
+        print(json.dumps({"stages": st}), flush=True)
+    if parts & {"e2e", "rate"} or args.soak > 0:
         # Moving: three times the poses along the same path, every scan a new view.
         poses = poses_for(scene, 3 * args.frames)
         moving = scans(scene, lidar, poses, seed=0, noise=noise, frame="sensor")
     if "e2e" in parts:
-        res = e2e(moving, 10.0, in_process=args.in_process)
-        print(json.dumps({"e2e_10hz": res}), flush=True)
+        runs = []
+        for _ in range(max(args.runs, 1)):
+            res = e2e(moving, 10.0, in_process=args.in_process)
+            runs.append(res)
+            print(json.dumps({"e2e_10hz": {k: v for k, v in res.items() if k != "_samples"}}))
+        pooled = _pooled(runs)
+        print(json.dumps({"e2e_10hz_pooled": pooled}), flush=True)
+        if args.docs and st is not None:
+            from common import docs_command, host_load, write_docs_block
+
+            path = Path(SOURCE) / "docs" / "performance.md"
+            text = docs_text(st, pooled, args.noise)
+            cmd = docs_command("bench_node.py", sys.argv[1:])
+            write_docs_block(path, "bench_node", text, cmd, host_load(load0))
+            print(f"wrote {path}", file=sys.stderr)
     if "standing" in parts:
         # A robot standing before the scene (one pose of the sequence), a new scan each time:
         # with a noise-free sensor the map stops changing once its voxels are full.
@@ -458,10 +606,14 @@ def main() -> None:
         poses = np.repeat(pose[None], 3 * args.frames, 0)
         still = scans(scene, lidar, poses, noise=noise, frame="sensor")
         res = e2e(still, 10.0, in_process=args.in_process)
+        res.pop("_samples", None)
         print(json.dumps({"e2e_10hz_standing": res}), flush=True)
     if "rate" in parts:
         res = e2e(moving, 20.0, slow_consumer=0.05, in_process=args.in_process)
+        res.pop("_samples", None)
         print(json.dumps({"e2e_20hz_slow_consumer": res}), flush=True)
+    if args.soak > 0:
+        print(json.dumps({"soak": soak(moving, args.soak, 20.0)}), flush=True)
     if "growth" in parts:
         print(json.dumps({"growth": growth(sc)}), flush=True)
     if "ids" in parts:

@@ -63,6 +63,24 @@ _EXP_NUMBER = re.compile(r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+"
 _KEY_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _COMMENT_WIDTH = 100
 
+# Keys that existed and went: full dotted key -> what to do instead. Reading one is an error
+# that says so (never an "unknown key" guess, never silently ignored).
+_NOTHING_TO_SET = "detection now keeps pace, nothing to set"
+REMOVED_KEYS: dict[str, str] = {
+    "node.pipeline": "removed in 0.2: the node always merges in its receiving thread and "
+    "detects the latest scan in a second one; " + _NOTHING_TO_SET,
+    "node.detect_process": "removed in 0.2: "
+    + _NOTHING_TO_SET
+    + " (set node.threads to bound the kernels' threads)",
+    "node.surfaces_first": "removed in 0.2: "
+    + _NOTHING_TO_SET
+    + " (a detection's obstacles, then its surfaces)",
+    "node.defer_clear": "removed in 0.2: "
+    + _NOTHING_TO_SET
+    + " (each scan's clearing runs in its merge)",
+    "node.queue": "removed in 0.2: the node keeps the latest scan, " + _NOTHING_TO_SET,
+}
+
 
 # --------------------------------------------------------------------------------------------
 # Schema: derived once per root dataclass from the type hints and field metadata.
@@ -227,6 +245,8 @@ class _Checker:
         """The field ``key`` of ``schema``, or an 'unknown key' error with a suggestion."""
         if key in schema.fields:
             return schema.fields[key]
+        if full in REMOVED_KEYS:
+            raise self.source.fail(node, f"key '{full}' was {REMOVED_KEYS[full]}")
         known = list(schema.fields)
         close = difflib.get_close_matches(key, known, n=1)
         hint = f"did you mean '{close[0]}'?" if close else "known keys: " + ", ".join(known)

@@ -314,28 +314,12 @@ class NodeParams:
     map_period: float = param(
         1.0, "time between map messages (0: never publish the map)", "s", min=0.0, max=3600.0
     )
-    pipeline: bool = param(
-        True,
-        "merge every scan into the map as it arrives and detect in a second thread on the "
-        "newest map (false: one thread; scans that arrive while detecting are dropped)",
-    )
-    detect_process: bool = param(
-        True,
-        "pipeline: run the detection in a worker process, so that merging and detection each "
-        "have a core and an interpreter lock of their own (false: a thread of the node)",
-    )
-    surfaces_first: bool = param(
-        True,
-        "pipeline: publish each detection's surfaces (with their free space) as soon as they "
-        "are known and its obstacles once they are described, with the same seq (false: both "
-        "together, obstacles first, so a planner that reacts to surfaces has their obstacles)",
-    )
-    defer_clear: bool = param(
-        True,
-        "pipeline: clear each scan's free space (and forget stale voxels) once its detection "
-        "has the map's points, beside the detection, or right after the merge when no "
-        "detection takes the scan at once; a detection then sees a removed object one scan "
-        "longer (false: within the merge, before detecting)",
+    threads: int = param(
+        0,
+        "threads of the compiled kernels' parallel loops (0: numba's default, every core; the "
+        "node shares the cores with SLAM and the driver)",
+        min=0,
+        max=256,
     )
     safe_min_hits: int = param(
         2,
@@ -346,12 +330,6 @@ class NodeParams:
     max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
     max_message_bytes: int = param(
         64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024
-    )
-    queue: int = param(
-        1,
-        "scans kept when detection falls behind, newest first (1: newest only)",
-        min=1,
-        max=1000,
     )
     reject_log_period: float = param(
         5.0,

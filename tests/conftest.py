@@ -112,12 +112,12 @@ def node_keys(tmp_path: Path) -> dict[str, Path]:
 @contextlib.contextmanager
 def spinning_node(**node_keys):
     """A `Node` spinning in a thread over real sockets (``node.*`` keys overridden; by default
-    no map messages, diagnostics every 0.2 s, detection in the node's thread): yields (node,
+    no map messages, diagnostics every 0.2 s): yields (node,
     its thread); stops it on exit."""
     from supportnode.node.node import Node
     from supportnode.params import DetectParams
 
-    keys = {"map_period": 0.0, "diagnostics_period": 0.2, "detect_process": False, **node_keys}
+    keys = {"map_period": 0.0, "diagnostics_period": 0.2, **node_keys}
     p = DetectParams()
     with Node(dataclasses.replace(p, node=dataclasses.replace(p.node, **keys))) as node:
         node.open()

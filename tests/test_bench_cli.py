@@ -22,7 +22,7 @@ BENCH = Path(__file__).resolve().parent.parent / "bench" / "bench_node.py"
             ["--set", "node.map.radiuss=3"],
             "unknown key 'node.map.radiuss' (did you mean 'radius'?)",
         ),
-        (["--set", "node.surfaces_first=maybe"], "node.surfaces_first: expected true or false"),
+        (["--set", "node.scan_bind=maybe"], "node.scan_bind: expected true or false"),
     ],
 )
 def test_bad_flags_are_one_line_errors(args, message):

@@ -260,12 +260,12 @@ def test_out_of_range(tmp_path: Path) -> None:
             "surfaces.normal_filter: expected true or false, got 1",
         ),
         (
-            "node:\n  detect_process: maybe\n",
-            "node.detect_process: expected true or false, got 'maybe'",
+            "node:\n  scan_bind: maybe\n",
+            "node.scan_bind: expected true or false, got 'maybe'",
         ),
         (
-            "node:\n  defer_clear: 2\n",
-            "node.defer_clear: expected true or false, got 2",
+            "node:\n  pub_bind: 2\n",
+            "node.pub_bind: expected true or false, got 2",
         ),
         (
             "surfaces:\n  normal_filter: 'true'\n",

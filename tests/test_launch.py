@@ -386,7 +386,7 @@ def test_cli_check_and_bad_override(tmp_path):
             str(tmp_path / "l.yaml"),
             "--check",
             "--set",
-            "node.queue=2",
+            "node.detection_rate=2",
         ],
         capture_output=True,
         text=True,
@@ -394,7 +394,7 @@ def test_cli_check_and_bad_override(tmp_path):
         timeout=30,
     )
     assert result.returncode == 0, result.stderr
-    assert f"n: {sys.executable} -m supportnode run --set node.queue=2\n" in result.stdout
+    assert f"n: {sys.executable} -m supportnode run --set node.detection_rate=2\n" in result.stdout
     assert f"p: {sys.executable} p.py\n" in result.stdout
     result = subprocess.run(
         [sys.executable, "-m", "supportnode", "launch", str(tmp_path / "l.yaml"), "--set", "oops"],

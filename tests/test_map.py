@@ -10,7 +10,7 @@ from conftest import plane_points
 
 from supportnode.errors import InputError
 from supportnode.geometry.voxels import OUTER_INDEX, voxelize
-from supportnode.node.map import KeyHash, VoxelMap, pack_keys, unpack_keys
+from supportnode.map import KeyHash, VoxelMap, pack_keys, unpack_keys
 from supportnode.params import MapParams
 
 EYE = np.eye(4)
@@ -527,60 +527,3 @@ def test_stable_points_keep_both_faces_of_a_corner_seen_from_either_side(rng):
 def test_unknown_representation_is_a_clear_error():
     with pytest.raises(InputError, match=r"representation must be one of .*stable"):
         VoxelMap(representation="newest")
-
-
-def test_deferred_clearing_goes_through_the_same_map_states():
-    """integrate(defer_clear=True) merges only; finish() then clears and forgets: after each
-    finish the map is what integrate leaves (points, counters, version, every voxel's state),
-    on a moving sensor whose box goes away (clearing) with voxels ageing out (forgetting) and
-    more points than clear_rays (the random ray subset). Without finish, the next integrate
-    runs the pending clearing first and reports what it removed."""
-    from supportnode.sim import Lidar, parse_scene
-    from supportnode.sim.noise import parse_noise
-    from supportnode.sim.simulate import finish
-
-    with_box, without = parse_scene(SCENE + BOX), parse_scene(SCENE)
-    lidar = Lidar(32, -25.0, 10.0, 720, 0.3, 30.0, 10.0)
-    noise = parse_noise(["range:0.01"])
-    params = MapParams(radius=8.0, max_age=0.25)
-    maps = [VoxelMap(params, clear_rays=4096, age_slack=0.0) for _ in range(3)]
-    now, deferred, lazy = maps
-    lazy_removed = np.zeros((0, 3), np.int64)
-    held_back = 0  # voxels that deferred clearing kept in the map until finish, over the run
-
-    def state(m):
-        return m.points(), m.stats(), m.version, _by_key(m.voxels())
-
-    def same(a, b):
-        pa, sa, va, xa = state(a)
-        pb, sb, vb, xb = state(b)
-        assert np.array_equal(pa, pb) and sa == sb and va == vb
-        assert all(np.array_equal(xa[k], xb[k]) for k in xa)
-
-    def key_set(k):
-        return set(map(tuple, k))
-
-    for i in range(8):
-        scene = with_box if i < 3 else without
-        pose = _pose(0.0, 0.1 * i, 1.0, 3.0 * i)
-        cloud = finish(
-            lidar.scan(scene, pose, 0.1 * i), scene, noise, np.random.default_rng(i), "world"
-        )
-        t_now = now.integrate(cloud.points, pose, 0.1 * i, in_map_frame=True)
-        t_def = deferred.integrate(cloud.points, pose, 0.1 * i, in_map_frame=True, defer_clear=True)
-        assert deferred.clear_pending and len(t_def.removed) == 0
-        held_back += len(deferred) - len(now)
-        removed = deferred.finish().removed
-        assert not deferred.clear_pending and len(deferred.finish().removed) == 0
-        same(deferred, now)
-        assert key_set(removed) == key_set(t_now.removed) and len(removed) == len(t_now.removed)
-        assert key_set(t_now.keys) <= key_set(t_def.keys)
-        # The lazy map reports the clearing of scan i - 1 with scan i's integrate.
-        t_lazy = lazy.integrate(cloud.points, pose, 0.1 * i, in_map_frame=True, defer_clear=True)
-        assert key_set(t_lazy.removed) == key_set(lazy_removed)
-        lazy_removed = t_now.removed
-    assert key_set(lazy.finish().removed) == key_set(lazy_removed)
-    same(lazy, now)
-    st = now.stats()
-    assert held_back > 0 and st["cleared"] > 0 and st["dropped_age"] > 0, (held_back, st)
-    assert st["points_merged"] > 8 * 4096  # the ray subset was drawn on every scan

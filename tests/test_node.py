@@ -415,11 +415,9 @@ def test_too_many_points_rejected(rng):
         assert node.rejects == {"too_many_points": 1}
 
 
-@pytest.mark.parametrize("pipeline", [True, False])
-def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
-    """Scans at a rate detection cannot follow. Pipelined: every scan still enters the map and
-    detection skips to the newest (counted); one thread: scans are dropped at the socket.
-    Either way results keep coming, for the newest scans."""
+def test_slow_detection_over_sockets(rng, monkeypatch):
+    """Scans at a rate detection cannot follow: every scan still enters the map and detection
+    skips to the newest (counted); results keep coming, for the newest scans."""
     from supportnode.node import incremental
 
     full = incremental.full
@@ -431,8 +429,7 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
     monkeypatch.setattr(incremental, "full", slow_full)
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
-    # detect_process off: the slow detection is patched into this process.
-    with _spinning("surfaces", False, pipeline=pipeline, detect_process=False) as (node, pub, sub):
+    with _spinning("surfaces", False) as (node, pub, sub):
         n = 12
         for i in range(n):
             pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
@@ -450,19 +447,15 @@ def test_slow_detection_over_sockets(rng, monkeypatch, pipeline):
     assert got and got[-1].stamp == pytest.approx(1.0 + 0.1 * (n - 1)), "the newest scan"
     assert [round(s.height, 2) for s in got[-1].surfaces] == [0.5]
     assert c["detections"] < n
-    if pipeline:
-        assert c["scans_processed"] == n and c["scans_dropped"] == 0
-        assert c["detections_skipped"] >= 1
-        assert c["detections"] + c["detections_skipped"] == n
-    else:
-        assert c["scans_dropped"] >= 1
-        assert c["scans_processed"] + c["scans_dropped"] == n
+    assert c["scans_processed"] == n and c["scans_dropped"] == 0
+    assert c["detections_skipped"] >= 1
+    assert c["detections"] + c["detections_skipped"] == n
 
 
 def _slow_stages(monkeypatch, merge_s: float, detect_s: float) -> None:
     """Every merge into the map and every full detection take this much longer (s)."""
+    from supportnode.map import VoxelMap
     from supportnode.node import incremental
-    from supportnode.node.map import VoxelMap
 
     integrate, full = VoxelMap.integrate, incremental.full
 
@@ -485,7 +478,7 @@ def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
     n = 6
-    with _spinning("surfaces", False, detect_process=False) as (node, pub, _):
+    with _spinning("surfaces", False) as (node, pub, _):
         # Every 0.5 s: each arrives 0.35 s after the previous one's merge ended, during its
         # detection (0.4 s), and is merged 0.1 s after that detection ended.
         for i in range(n):
@@ -498,9 +491,7 @@ def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
         total = node.latency.stats()["total"].p50  # receive to results
     assert c["scans_processed"] == n and c["detections_skipped"] == 0, c
     assert c["detections"] == n
-    # Merge 0.15 s + detection 0.4 s, and no wait: the old rule (arrived during a detection:
-    # wait up to 0.5 s after its arrival for a fresher scan, here not merged by then) made it
-    # 0.91 s.
+    # Merge 0.15 s + detection 0.4 s, and no wait for a fresher scan.
     assert total < 0.75, total
 
 
@@ -521,7 +512,7 @@ def test_decoder_bug_is_a_reject_not_the_end_of_the_node(rng, monkeypatch):
     monkeypatch.setattr(node_module, "decode_any", flaky)
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
-    with _spinning("surfaces", False, detect_process=False) as (node, pub, sub):
+    with _spinning("surfaces", False) as (node, pub, sub):
         for i in range(3):
             pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
             time.sleep(0.3)
@@ -533,31 +524,6 @@ def test_decoder_bug_is_a_reject_not_the_end_of_the_node(rng, monkeypatch):
         c, rejects = dict(node.counters), dict(node.rejects)
     assert rejects == {"internal_error": 1} and c["scans_rejected"] == 1
     assert c["scans_processed"] == 2 and len(got) == 2
-
-
-def test_busy_detector_waits_for_the_next_scan_as_long_as_its_merge_takes(rng, monkeypatch):
-    """Scans every 0.2 s, each merged in 0.12 s (over half a period), detection 0.5 s: when
-    the detector becomes free the newest scan has waited for it, and the next one is ready 0.32
-    s after that one arrived. The detector waits for it (a period and 1.5 merges, 0.38 s), so
-    results are a merge and a detection old, not a detection and a wait."""
-    _slow_stages(monkeypatch, merge_s=0.12, detect_s=0.5)
-    pose = _sensor_pose(0, 0, 1.5)
-    pts = _platform(rng, 0, 0) - pose[:3, 3]
-    n = 16
-    with _spinning("surfaces", False, detect_process=False) as (node, pub, _):
-        t0 = time.monotonic()
-        for i in range(n):
-            pub.publish(_cloud(pts + 0.001 * i, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
-            time.sleep(max(t0 + 0.2 * (i + 1) - time.monotonic(), 0.0))
-        deadline = time.monotonic() + 10
-        while node._job is not None or node._detecting:
-            assert time.monotonic() < deadline
-            time.sleep(0.05)
-        total = node.latency.stats()["total"].p50  # receive to results
-    # Merge 0.12 s + detection 0.5 s = 0.62 s. The old deadline (1.5 periods, 0.3 s after the
-    # waiting scan arrived) gave up on the next scan 0.02 s before it was merged: the waiting
-    # scan was detected 0.3 + 0.5 = 0.8 s after it arrived.
-    assert total < 0.72, total
 
 
 def test_real_kinect_sequence_keeps_its_points_and_ids(real_scans):
@@ -583,17 +549,14 @@ def test_real_kinect_sequence_keeps_its_points_and_ids(real_scans):
     assert [len(o.surfaces.surfaces) for o in outs[3:]] == [1] * 6
 
 
-@pytest.mark.parametrize("surfaces_first", [True, False])
-def test_surfaces_first_over_sockets(rng, surfaces_first):
-    """node.surfaces_first: each detection's surfaces go out before its obstacles (same seq),
-    so a planner gets the places to stand and their free space without waiting for the
-    obstacles' hulls; off, the obstacles come first. Either way every detection sends both."""
+def test_obstacles_then_surfaces_over_sockets(rng):
+    """Each detection's obstacles go out before its surfaces (same seq): a planner that reacts
+    to surfaces has their obstacles. Every detection sends both."""
     pose = _sensor_pose(0, 0, 1.5)
     box = box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)
     pts = np.vstack([_platform(rng, 0, 0), box]) - pose[:3, 3]
     order = []
-    keys = {"detect_process": False, "surfaces_first": surfaces_first}
-    with _spinning(["surfaces", "obstacles"], False, **keys) as (node, pub, sub):
+    with _spinning(["surfaces", "obstacles"], False) as (node, pub, sub):
         for i in range(3):
             pub.publish(_cloud(pts, 1.0 + 0.1 * i, seq=i + 1, pose=pose))
             deadline = time.monotonic() + 10
@@ -602,8 +565,8 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
                 if isinstance(msg, SupportSurfaces | ObstacleClusters):
                     order.append((msg.seq, type(msg).__name__, msg))
         d = node.diagnostics()
-    first, second = ("SupportSurfaces", "ObstacleClusters")[:: 1 if surfaces_first else -1]
-    assert [(s, k) for s, k, _ in order] == [(s, k) for s in (1, 2, 3) for k in (first, second)]
+    kinds = ("ObstacleClusters", "SupportSurfaces")
+    assert [(s, k) for s, k, _ in order] == [(s, k) for s in (1, 2, 3) for k in kinds]
     surfaces = [m for _, k, m in order if k == "SupportSurfaces"]
     obstacles = [m for _, k, m in order if k == "ObstacleClusters"]
     assert [round(s.height, 2) for s in surfaces[-1].surfaces] == [0.5]
@@ -612,12 +575,9 @@ def test_surfaces_first_over_sockets(rng, surfaces_first):
     assert 0 < d.latencies["receive_to_surfaces"].p50 <= d.latencies["receive_to_publish"].p99
 
 
-@pytest.mark.parametrize("defer_clear", [True, False])
-def test_removed_object_leaves_the_results_over_sockets(rng, defer_clear):
-    """`spin` with its detection worker: a box taken away leaves the published obstacles
-    within a few scans, and the map counts what it cleared; also with the clearing deferred
-    to the detection thread (node.defer_clear, the default), where each scan's detection
-    sees the clearing of the scans before it only."""
+def test_removed_object_leaves_the_results_over_sockets(rng):
+    """`spin`: a box taken away leaves the published obstacles within a few scans, and the
+    map counts what it cleared."""
     pose = _sensor_pose(-2.0, 0, 1.2)
     board = lambda: _platform(rng, 0, 0, n=8000)  # noqa: E731
     box = lambda: box_points(rng, (0.0, 0.0, 0.65), (0.3, 0.3, 0.3), 4000)  # noqa: E731
@@ -626,11 +586,7 @@ def test_removed_object_leaves_the_results_over_sockets(rng, defer_clear):
     ]
     at_box = lambda m: [c for c in m.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]  # noqa: E731
     seen = []
-    with _spinning("obstacles", False, defer_clear=defer_clear) as (node, pub, sub):
-        deadline = time.monotonic() + 60
-        while node._worker is None or not node._worker.ready():
-            assert time.monotonic() < deadline, "worker did not start"
-            time.sleep(0.05)
+    with _spinning("obstacles", False) as (node, pub, sub):
         for i in range(14):
             parts = [board(), box(), wall()] if i < 3 else [board(), wall()]
             stamp = 1.0 + 0.1 * i
@@ -648,43 +604,6 @@ def test_removed_object_leaves_the_results_over_sockets(rng, defer_clear):
     assert seen[2] >= 1 and seen[-1] == 0, seen
     c = d.counters
     assert c["map_cleared"] > 0 and c["detections"] == len(seen), c
-    assert c["worker_detections"] + c["detections_reused"] == len(seen), c
-    assert ("clear" in d.latencies) == defer_clear  # deferred clearings, timed when they ran
-
-
-def test_worker_lost_after_sending_surfaces_publishes_them_once(rng):
-    """A worker that dies after it sent a detection's surfaces: the node redoes the detection
-    in its own thread, but publishes and tracks those surfaces once, and the obstacles that
-    follow carry their seq."""
-    from supportnode.node import incremental
-    from supportnode.node.worker import WorkerError
-
-    class DiesAfterSurfaces:
-        pid = 0
-
-        def ready(self) -> bool:
-            return True
-
-        def detect(self, points, stop, on_surfaces, on_sent=None, free_below=None):
-            on_surfaces(incremental.full(points, DetectParams(), free_below=free_below))
-            raise WorkerError("detection worker died (exit code -9)")
-
-        def close(self) -> None:
-            pass
-
-    pose = _sensor_pose(0, 0, 1.5)
-    box = box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)
-    pts = np.vstack([_platform(rng, 0, 0), box]) - pose[:3, 3]
-    sent = []
-    with Node(incremental=False) as node:
-        node._worker = DiesAfterSurfaces()
-        job = node._ingest(_cloud(pts, 1.0, seq=1, pose=pose), {})
-        out = node._detect_job(job, {}, sent.append)
-        hits = [t["hits"] for t in node.surface_tracker.tracks.values()]
-    assert len(sent) == 1 and out.surfaces_sent and out.surfaces is sent[0]
-    assert [round(s.height, 2) for s in sent[0].surfaces] == [0.5] and hits == [1]
-    assert out.obstacles.seq == sent[0].seq and out.obstacles.clusters
-    assert node.counters["worker_failures"] == 1
 
 
 def _removed_box_clouds(rng, pose, n=10, wall_only=False):
@@ -708,88 +627,8 @@ def _removed_box_clouds(rng, pose, n=10, wall_only=False):
     return clouds
 
 
-class _InProcessWorker:
-    """A detection worker that detects in this thread, recording whether the map's clearing
-    was pending when the points were sent, after on_sent and when the detection ended;
-    ``between``: called between sending and on_sent."""
-
-    pid = 0
-
-    def __init__(self, node, between=None):
-        self.node, self.between, self.log = node, between, []
-
-    def ready(self):
-        return True
-
-    def detect(self, points, stop, on_surfaces, on_sent=None, free_below=None):
-        sent = np.array(points, copy=True)
-        pending = self.node.map.clear_pending
-        if self.between is not None:
-            self.between()
-        if on_sent is not None:
-            on_sent()
-        after_sent = self.node.map.clear_pending
-        items = incremental.full(
-            sent, DetectParams(), on_surfaces=on_surfaces, free_below=free_below
-        )
-        self.log.append((pending, after_sent, self.node.map.clear_pending))
-        return items
-
-    def rss_mb(self):
-        return float("nan")
-
-    def close(self):
-        pass
-
-
-def _map_state(m):
-    return m.points(), m.stats(), m.version, m.clear_pending
-
-
-def _same_map(a, b):
-    pa, sa, va, ca = _map_state(a)
-    pb, sb, vb, cb = _map_state(b)
-    assert np.array_equal(pa, pb) and sa == sb and va == vb and ca == cb
-
-
-@pytest.mark.parametrize("surfaces_first", [False, True])
-def test_deferred_clearing_runs_beside_the_worker(rng, surfaces_first):
-    """The pipelined node's detection with node.defer_clear: the scan is merged, detection
-    takes the map's points, and the scan's clearing runs once the worker has them (with or
-    without surfaces first). The map goes through the same states as the serial node's (which
-    clears before detecting), and the box leaves the results one scan later."""
-    pose = _sensor_pose(-2.0, 0, 1.2)
-    clouds = _removed_box_clouds(rng, pose, 12)
-
-    def at_box(out):
-        return [c for c in out.obstacles.clusters if (np.abs(c.centroid[:2]) < 0.2).all()]
-
-    serial, deferred = [], []
-    with Node(incremental=False) as ref, Node(incremental=False) as node:
-        node._worker = worker = _InProcessWorker(node)
-        for cloud in clouds:
-            serial.append(len(at_box(ref.process(cloud))))
-            job = node._ingest(cloud, {}, defer=True)
-            assert node.map.clear_pending
-            out = node._detect_job(job, {}, [].append if surfaces_first else None)
-            if out.reused:  # no points sent: the clearing waits for the next merge
-                assert node.map.clear_pending
-                with node._lock:
-                    node._finish_map()
-            deferred.append(len(at_box(out)))
-            _same_map(node.map, ref.map)
-        d = node.diagnostics()
-    # Pending when the points went out, done before the worker's detection returned.
-    assert worker.log and set(worker.log) == {(True, False, False)}, worker.log
-    # Scan k's detection sees the map the serial node's detection of scan k - 1 saw, but for
-    # scan k's merge (of a board and a wall seen before): the same obstacles at the box.
-    assert serial[2] >= 1 and serial[-2] == 0, serial
-    assert deferred[3:] == serial[2:-1], (serial, deferred)
-    assert d.counters["map_cleared"] > 0 and d.latencies["clear"].p50 > 0
-
-
-def test_deferred_clearing_region_is_detected_again(rng):
-    """What a deferred clearing removed joins the region the next detection recomputes, and
+def test_cleared_region_is_detected_again(rng):
+    """What a scan's clearing removed joins the region the next detection recomputes, and
     changes the map's version: a node detecting regionally (or reusing its last detection on
     an unchanged map) publishes what a full recompute does, and the box leaves the results,
     also where the scans that follow do not reach (only a band of the wall behind it)."""
@@ -798,13 +637,7 @@ def test_deferred_clearing_region_is_detected_again(rng):
     outs = {}
     for inc in (True, False):
         with Node(incremental=inc) as node:
-            node._worker = _InProcessWorker(node)
-            outs[inc] = []
-            for cloud in clouds:
-                job = node._ingest(cloud, {}, defer=True)
-                outs[inc].append(node._detect_job(job, {}))
-                with node._lock:  # what the detection loop does after publishing
-                    node._finish_map()
+            outs[inc] = [node.process(cloud) for cloud in clouds]
             assert node.map.stats()["cleared"] > 0
     assert any(o.incremental for o in outs[True])
     for a, b in zip(outs[True], outs[False], strict=True):
@@ -818,91 +651,3 @@ def test_deferred_clearing_region_is_detected_again(rng):
 
     # Where rays from the sensor cross (its top and the side facing the sensor) it goes.
     assert box_points_seen(outs[True][-1]) < 0.7 * box_points_seen(outs[True][2])
-
-
-def test_published_map_has_the_pending_clearing_done(rng):
-    """Between a scan's merge and its deferred clearing (node.defer_clear), the map that goes
-    out on the map topic is the cleared one: the removed box is not in it."""
-    pose = _sensor_pose(-2.0, 0, 1.2)
-    clouds = _removed_box_clouds(rng, pose, 12)
-
-    def box_voxels(cloud):
-        p = cloud.points
-        return int(np.sum((np.abs(p[:, :2]) < 0.2).all(axis=1) & (p[:, 2] > 0.55)))
-
-    with Node(incremental=False) as ref, Node(incremental=False) as node:
-        for cloud in clouds:
-            ref.process(cloud)  # clears within the merge
-            node._ingest(cloud, {}, defer=True)
-            assert node.map.clear_pending
-            with node._lock:
-                got = node.map_cloud()
-            assert not node.map.clear_pending
-            want = ref.map_cloud()
-            assert np.array_equal(np.sort(got.points, 0), np.sort(want.points, 0))
-        # Where the rays cross it (its top and the side facing the sensor) the box is gone.
-        left, first = box_voxels(node.map_cloud()), box_voxels(_first_map(rng, pose))
-    assert left < 0.2 * first, (left, first)
-
-
-def _first_map(rng, pose):
-    with Node(incremental=False) as node:
-        node.process(_removed_box_clouds(rng, pose, 1)[0])
-        return node.map_cloud()
-
-
-def test_clearing_pending_at_a_reset_is_dropped(rng):
-    """A source that restarted (a stamp back in time) resets the map: the old map's pending
-    clearing goes with it, never onto the new map (its forgetting, at the old stamp 20 s,
-    would drop everything the new scans at 1 s put in), and a detection of the old map that
-    sends its points after the reset does not run the new map's clearing."""
-    pose = _sensor_pose(-2.0, 0, 1.2)
-    a, b, c = _removed_box_clouds(rng, pose, 3)
-    a = dataclasses.replace(a, stamp=20.0)
-    b = dataclasses.replace(b, stamp=1.0)
-    c = dataclasses.replace(c, stamp=0.5)
-    with Node(incremental=False) as node, Node() as fresh_b, Node() as fresh_c:
-        node._ingest(a, {}, defer=True)
-        old = node.map
-        job = node._ingest(b, {}, defer=True)  # before a: a reset
-        assert node.counters["time_jumps"] == 1 and node.map is not old
-        assert old.clear_pending  # dropped with the old map
-        fresh_b._ingest(b, {}, defer=True)
-        _same_map(node.map, fresh_b.map)
-
-        # The detection of b sends its points after c (another restart) reset the map again.
-        maps = [node.map]
-        node._worker = worker = _InProcessWorker(node, lambda: node._ingest(c, {}, defer=True))
-        assert node._detect_job(job, {}) is None  # stale: the map was reset meanwhile
-        assert worker.log == [(True, True, True)] and node.counters["time_jumps"] == 2
-        assert maps[0].clear_pending and node.map is not maps[0]
-        fresh_c._ingest(c, {}, defer=True)
-        _same_map(node.map, fresh_c.map)
-        for n in (node, fresh_c):
-            with n._lock:
-                n._finish_map()
-        _same_map(node.map, fresh_c.map)
-        assert len(node.map) > 0 and not node.map.clear_pending
-
-
-def test_scans_no_detection_takes_are_cleared_at_once(rng):
-    """Pipelined, node.defer_clear: a scan that comes while the detector is busy, or that no
-    detection is due for (node.detection_rate), has its clearing run as soon as it is merged,
-    not before the next scan's merge; one handed to an idle detector leaves it to the
-    detection (after it took the map's points)."""
-    pose = _sensor_pose(-2.0, 0, 1.2)
-    clouds = [[bytes(f) for f in c.encode("scan")] for c in _removed_box_clouds(rng, pose, 4)]
-    p = DetectParams()
-    slow = dataclasses.replace(p, node=dataclasses.replace(p.node, detection_rate=5.0))
-    with Node() as node, Node(slow) as limited:
-        node._ingest_for_detection(clouds[0], time.perf_counter())
-        assert node._job is not None and node.map.clear_pending  # for the idle detector
-        node._detecting = True
-        node._ingest_for_detection(clouds[1], time.perf_counter())
-        assert node.counters["detections_skipped"] == 1 and not node.map.clear_pending
-        pending = []
-        for frames in clouds[1:]:  # 0.1 s apart: detections due at 1.1 and 1.3 s, not 1.2
-            limited._ingest_for_detection(frames, time.perf_counter())
-            pending.append((limited.map.clear_pending, limited._job is not None))
-            limited._job = None
-        assert pending == [(True, True), (False, False), (True, True)]

@@ -250,7 +250,7 @@ def test_no_error_while_publishing_diagnostics_ends_spin(monkeypatch):
 def test_internal_errors_are_logged_rate_limited(monkeypatch, caplog):
     """A bug hit by every scan logs one line (with its traceback) per reject_log_period,
     not one per scan; each is still counted."""
-    from supportnode.node import map as node_map
+    from supportnode.map import store as node_map
 
     def broken(self, *a, **kw):
         raise RuntimeError("map bug")

@@ -76,12 +76,7 @@ def test_offline_results_equal_a_live_replay_the_node_keeps_up_with(tmp_path: Pa
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     base = [sys.executable, "-m", "supportnode"]
     node = subprocess.Popen(
-        [*base, "run", "--set", f"node.scan_endpoint={scan_ep}", "--set", f"node.pub_endpoint={pub_ep}",
-         # node.defer_clear (live default) lets a detection run before its own scan's
-         # free-space clearing, a latency trade: areas and obstacle sizes then differ by a
-         # few voxels from Node.process, which clears first (measured: scan 0.4, table
-         # 1.15 vs 1.16 m^2, an obstacle 268 vs 226 points)
-         "--set", "node.defer_clear=false"],
+        [*base, "run", "--set", f"node.scan_endpoint={scan_ep}", "--set", f"node.pub_endpoint={pub_ep}"],
         cwd=REPO, env=env, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     live = tmp_path / "live.mcap"

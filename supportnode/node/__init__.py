@@ -1,4 +1,4 @@
-"""The node's state and loop: incremental voxel map (`map`), stable ids (`tracking`)."""
+"""The node: `core` (ingest, detect), `node` (threads and sockets around it), `tracking` (stable ids)."""
 
 __all__ = ["Node", "NodeOutput"]
 

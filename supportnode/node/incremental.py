@@ -26,9 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from supportnode.geometry.freespace import FreeSpace
-from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects import Cluster
-from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.geometry.surfaces import Surface
 from supportnode.params import DetectParams
 from supportnode.pipeline import detect
 
@@ -72,19 +71,9 @@ def _from_detection(
     points: np.ndarray,
     params: DetectParams,
     origin: np.ndarray | None,
-    memo: Memo | None = None,
-    on_surfaces: Callable[[Items], None] | None = None,
     free_below: float | None = None,
 ) -> Items:
-    early = None
-    if on_surfaces is not None:
-
-        def early(surfaces: SurfaceResult, free: list[FreeSpace], _: object) -> None:
-            on_surfaces(Items(surfaces=list(surfaces.surfaces), free=list(free)))
-
-    d = detect(
-        points, params, sensor_origin=origin, memo=memo, on_surfaces=early, free_below=free_below
-    )
+    d = detect(points, params, sensor_origin=origin, free_below=free_below)
     clusters = d.objects.clusters if d.objects is not None else []
     labels = d.objects.labels if d.objects is not None else np.zeros(0, np.int32)
     return Items(
@@ -116,16 +105,11 @@ def full(
     points: np.ndarray,
     params: DetectParams,
     origin: np.ndarray | None = None,
-    memo: Memo | None = None,
-    on_surfaces: Callable[[Items], None] | None = None,
     free_below: float | None = None,
 ) -> Items:
-    """Detection on all of ``points`` (N, 3), metres, z up; memo: per-item results of the
-    previous detections (the same result, sooner). on_surfaces: called, before the objects
-    are described, with Items holding only the surfaces and their free space (the same as
-    the result's). free_below: free space only for surfaces lower than this, metres (None:
-    all; see `pipeline.detect`)."""
-    return _from_detection(points, params, origin, memo, on_surfaces, free_below)
+    """Detection on all of ``points`` (N, 3), metres, z up. free_below: free space only for
+    surfaces lower than this, metres (None: all; see `pipeline.detect`)."""
+    return _from_detection(points, params, origin, free_below)
 
 
 def regional(

@@ -23,8 +23,8 @@ import numpy as np
 
 from supportnode.errors import ProtocolError
 from supportnode.geometry.transform import quaternion_matrix
+from supportnode.map import coordinate_range
 from supportnode.msgs import Limits, PointCloud, SeqCounter, decode_any
-from supportnode.node.map import coordinate_range
 from supportnode.params import NodeParams
 
 __all__ = [
@@ -74,7 +74,7 @@ class Reject:
 
 def scan_problem(cloud: PointCloud, limit: np.ndarray) -> Reject | None:
     """What makes a decoded scan unusable on its own, or None. limit: (3,) metres, the map's
-    coordinate range (`supportnode.node.map.coordinate_range`)."""
+    coordinate range (`supportnode.map.coordinate_range`)."""
     if cloud.count == 0:
         if cloud.dropped_nonfinite:
             text = f"all {cloud.dropped_nonfinite} points have a NaN/Inf coordinate"

@@ -1,0 +1,97 @@
+"""Free-space clearing: a scan's rays remove the evidence of the voxels they pass through."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from supportnode.kernels.rays import ray_voxels
+from supportnode.map.keys import _OFFS, _SHIFTS, pack_keys
+from supportnode.map.scan import _plane_fits
+from supportnode.map.state import StoreState
+
+_SHIFT_ARR = np.array(_SHIFTS, np.int64)
+
+
+class Clearing(StoreState):
+    """Mixin of `VoxelMap`: ray clearing."""
+
+    def _clear(self, cols: list[np.ndarray], origin: np.ndarray) -> np.ndarray:
+        """Free-space clearing along the scan's rays; returns the removed (R, 3) keys.
+
+        Rays (a random subset of ``clear_rays``) are sampled every voxel length from the origin
+        up to two voxels before their hit. A stored voxel met on the way and not hit by this
+        scan loses evidence if the ray really went through what it holds:
+        - planar voxel (>= 4 points spread in two directions, thinnest spread < 1/4 of the
+          next): the ray crosses the voxel's plane inside the voxel (half a voxel of margin)
+          and ends at least ``clear_tolerance`` behind that plane. A ray grazing a floor ends
+          on the same plane, so distant floor seen at grazing angles survives;
+        - other voxels (few points, or a line of them: one lidar ring): the ray ends at least
+          ``clear_tolerance`` above or below the voxel's centroid, so a ray that ends on the
+          same horizontal surface never clears it (z is up in the map frame).
+        Evidence drops by one per scan, by two when three or more rays agree.
+        """
+        size = self.size
+        pack_keys(np.floor(origin / size).astype(np.int64)[None])  # range check of the origin
+        if len(cols[0]) > self.clear_rays:
+            pick = self._rng.choice(len(cols[0]), self.clear_rays, replace=False)
+            pts = np.stack([c[pick] for c in cols], axis=1)
+        else:
+            pts = np.stack(cols, axis=1)
+        d = pts - origin
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        # Nothing is kept beyond the radius: marching further (a stray return kilometres away)
+        # would only cost time.
+        rng_ = np.minimum(dist, self.params.radius + 2 * size)
+        # One sample per voxel length: a ray may skip a corner it clips, which only delays
+        # clearing there; half steps would double the cost for little. Rays of three voxels
+        # or less get none.
+        step = size
+        n = np.maximum(np.floor((rng_ - 2 * size) / step).astype(np.int64), 0)
+        n = np.where(dist > 3 * size, n, 0)
+        # Rays without samples are dropped (a zero-length one has no direction).
+        keep = np.flatnonzero(n)
+        n, d, dist, pts = n[keep], d[keep], dist[keep], pts[keep]
+        u = d / dist[:, None]
+        # The stored voxels the rays pass through and this scan did not hit (those it hit
+        # are seen, not seen through), each (ray, voxel) once: compiled (kernels.rays).
+        ray, slot = ray_voxels(
+            origin, u, n, size, self._hash.table, _OFFS, _SHIFT_ARR, self._last_scan, self._scans
+        )
+        if len(slot) == 0:
+            return np.zeros((0, 3), np.int64)
+
+        uniq, inv = np.unique(slot, return_inverse=True)
+        corner = self._keys[uniq] * size
+        mean, _, normal, planar = _plane_fits(
+            self._count[uniq], self._sums[uniq], self._outer[uniq], size
+        )
+        c = (corner + mean)[inv]
+        n_ = normal[inv]
+        uu, hit = u[ray], pts[ray]
+        tol = self.clear_tolerance
+
+        # Planar: crossing point of the ray with the voxel's plane, inside the voxel (+ half a
+        # voxel of margin: its plane is fitted to few points), and the hit behind the plane by
+        # at least tol.
+        denom = np.einsum("ij,ij->i", uu, n_)
+        safe = np.where(np.abs(denom) > 1e-9, denom, 1e-9)
+        tc = np.einsum("ij,ij->i", c - origin, n_) / safe
+        cross = origin + uu * tc[:, None]
+        rel = cross - corner[inv]
+        inside = np.all((rel > -0.5 * size) & (rel < 1.5 * size), axis=1) & (tc > 0)
+        o_side = np.einsum("ij,ij->i", origin - c, n_)
+        h_side = np.einsum("ij,ij->i", hit - c, n_)
+        behind = (np.sign(o_side) != np.sign(h_side)) & (np.abs(h_side) >= tol)
+        through_planar = inside & behind & (np.abs(denom) > 1e-9)
+
+        # Sparse or linear (a lidar ring leaves a line of points): the ray went through the
+        # voxel (it was sampled in it) and ends clearly above or below it.
+        through_other = np.abs(hit[:, 2] - c[:, 2]) >= tol
+        through = np.where(planar[inv], through_planar, through_other)
+        # One decrement per voxel and scan, two when several rays agree (a single ray through
+        # a voxel may be noise; several are a clear view through it).
+        hit_slots, rays_through = np.unique(slot[through], return_counts=True)
+        self._evidence[hit_slots] -= np.where(rays_through >= 3, 2, 1).astype(np.int32)
+        gone = hit_slots[self._evidence[hit_slots] <= 0]
+        self._stats["cleared"] += len(gone)
+        return self._remove(gone)

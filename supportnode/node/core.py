@@ -1,0 +1,387 @@
+"""The node's core: one scan in (`NodeCore.ingest`), its results out (`NodeCore.detect`).
+
+No threads, no locks, no sockets. The two calls split the work by who owns what:
+
+- `ingest` (the receiving side) owns the map, the gravity estimate and the scan timeline: it
+  merges the scan and, when a detection is due, returns a `Job` holding everything the
+  detection needs (a snapshot of the map's points in the detection frame, the region the
+  scans changed, the map's identity and version), so the detection never reads the map;
+- `detect` (the detecting side) owns the trackers and the previous detection: it detects on
+  the job's points (only on the changed region when that equals a full recompute, or the
+  previous result when the map did not change), assigns stable ids and makes the messages.
+
+A map reset (a source that restarted) starts a new map *generation* on the receiving side;
+the detecting side resets its trackers when it first sees a job of a newer generation, so
+neither side writes the other's state. `Node.process` is ``detect(ingest(cloud))``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from supportnode.detection.policy import is_safe
+from supportnode.errors import InputError
+from supportnode.geometry.transform import quaternion_matrix, transform_points
+from supportnode.map import VoxelMap
+from supportnode.msgs import ObstacleClusters, PointCloud, SupportSurfaces
+from supportnode.node import incremental
+from supportnode.node.gravity import Gravity, Verdict
+from supportnode.node.incremental import Items
+from supportnode.node.intake import BACKWARD_S
+from supportnode.node.latency import RateLimitedLog
+from supportnode.node.tracking import ClusterTracker, SurfaceTracker
+from supportnode.params import DetectParams
+
+__all__ = ["DETECT_COUNTERS", "INGEST_COUNTERS", "Job", "MapLike", "NodeCore", "NodeOutput"]
+
+# Horizontal planes less than this below the sensor, or above it, are ceilings and
+# undersides, not supports: the node publishes only surfaces lower than sensor z minus this, m.
+_UNDER_SENSOR_M = 0.05
+# A scan stamped this much before the previous one means the source restarted: the map and
+# ids start over rather than mixing two timelines.
+_TIME_JUMP = BACKWARD_S
+# Each side's counters: a fixed key set, so that a copy taken by another thread never sees
+# the dict change size (only values change, in place).
+INGEST_COUNTERS = (
+    "scans_processed",
+    "time_jumps",
+    "points_nonfinite",
+    "gravity_failures",
+    "gravity_outliers",
+)
+DETECT_COUNTERS = ("detections", "incremental_detections", "detections_reused")
+
+
+class MapLike(Protocol):
+    """What the core needs of a map (`supportnode.map.VoxelMap`). A map may also have an int
+    ``version`` that changes whenever its points may have: the core then reuses the previous
+    detection of an unchanged map (its result is the same)."""
+
+    def integrate(self, points: np.ndarray, pose: np.ndarray, stamp: float) -> Any: ...
+    def points(self) -> np.ndarray: ...
+    def stats(self) -> dict[str, int]: ...
+
+
+@dataclass
+class NodeOutput:
+    """What one scan produced.
+
+    surfaces, obstacles: the messages to publish; None when the scan only updated the map
+    (``node.detection_rate``). timings: seconds per stage (gravity, map, points, surfaces,
+    objects, free_space, track, messages, total). new_ids / gone_ids: stable ids that appeared /
+    vanished, per kind ("surfaces", "obstacles"). incremental: detection ran on a crop of the map.
+    reused: the map had not changed since the previous detection, whose result this is.
+    items: the detection behind the messages (detection ids, not stable ids).
+    """
+
+    surfaces: SupportSurfaces | None
+    obstacles: ObstacleClusters | None
+    timings: dict[str, float] = field(default_factory=dict)
+    new_ids: dict[str, list[int]] = field(default_factory=dict)
+    gone_ids: dict[str, list[int]] = field(default_factory=dict)
+    incremental: bool = False
+    items: Items | None = None
+    reused: bool = False
+
+
+@dataclass
+class Job:
+    """A merged scan due for detection, with what its detection needs (no map access).
+
+    points: (P, 3) float64 detection-frame points of the map after the scan, metres.
+    region: x, y box (lo, hi) in the detection frame of what changed since the previous
+    job handed over (`merged_with` widens it when a job replaces an untaken one).
+    """
+
+    points: np.ndarray
+    rotation: np.ndarray  # (3, 3) map -> detection frame (gravity correction)
+    sensor_z: float  # the sensor's height in the detection frame, m
+    stamp: float
+    frame: str
+    generation: int  # of the map it went into (a reset starts a new one)
+    source: tuple[int, int | None]  # (generation, map version): equal sources, equal points
+    region: tuple[np.ndarray, np.ndarray]
+    timings: dict[str, float] = field(default_factory=dict)  # of its ingest
+    t_recv: float = 0.0  # perf_counter when it was received (spin)
+
+    def merged_with(self, older: Job) -> Job:
+        """This job, its region widened by an older one that no detection took."""
+        lo = np.minimum(self.region[0], older.region[0])
+        hi = np.maximum(self.region[1], older.region[1])
+        return dataclasses.replace(self, region=(lo, hi))
+
+
+def _empty_box() -> tuple[np.ndarray, np.ndarray]:
+    return np.full(2, np.inf), np.full(2, -np.inf)
+
+
+class NodeCore:
+    """Gravity, map and detection of a scan stream (see the module docstring).
+
+    params: the whole configuration. map_factory: makes the map (default: `VoxelMap` of
+    ``node.map``), again at each reset. incremental: detect only on the region the scans
+    touched when that equals a full recompute. logger: for the stream's warnings.
+    """
+
+    def __init__(
+        self,
+        params: DetectParams | None = None,
+        *,
+        map_factory: Callable[[], MapLike] | None = None,
+        incremental: bool = True,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.params = params or DetectParams()
+        self.cfg = self.params.node
+        self.incremental = incremental
+        self.log = logger or logging.getLogger("supportnode.node")
+        self._map_factory = map_factory or (lambda: VoxelMap(self.cfg.map))
+        self._stream_log = RateLimitedLog(self.log, self.cfg.reject_log_period)
+        self.gravity = Gravity(self.params)
+        self.ingest_counters = dict.fromkeys(INGEST_COUNTERS, 0)
+        self.detect_counters = dict.fromkeys(DETECT_COUNTERS, 0)
+        self.generation = 0
+        self.posed, self.frame = False, "map"
+        self.last_counts = (0, 0)  # surfaces, obstacles of the last detection (a gauge)
+        self._seen_generation = 0  # the detecting side's: its trackers are of this one
+        self.reset()
+        self._reset_detection()
+
+    # ---------------------------------------------------------------- receiving side
+
+    def reset(self) -> None:
+        """Forget the map (a new generation: the detecting side then forgets its ids and
+        previous detection). The map frame's up direction stays."""
+        self.map: MapLike = self._map_factory()
+        self.last_stamp: float | None = None
+        self._last_detect: float | None = None
+        self._pending = _empty_box()
+        self.generation += 1
+
+    def ingest(self, cloud: PointCloud) -> Job | None:
+        """Merge one admitted scan into the map; the `Job` of its detection when one is due
+        (``node.detection_rate``), else None. Raises InputError for a scan without points."""
+        if cloud.count == 0:
+            raise InputError("scan has no finite points")
+        timings: dict[str, float] = {}
+        stamp = float(cloud.stamp)
+        c = self.ingest_counters
+        if self.last_stamp is not None and stamp < self.last_stamp - _TIME_JUMP:
+            c["time_jumps"] += 1
+            self._stream_log.warning(
+                f"scan stamp {stamp:.3f} is before the previous {self.last_stamp:.3f}: "
+                "source restarted, map reset"
+            )
+            self.reset()
+        c["points_nonfinite"] += int(cloud.dropped_nonfinite)
+        pose = np.eye(4)
+        if cloud.pose is not None:
+            pose[:3, :3] = quaternion_matrix(cloud.pose.rotation)
+            pose[:3, 3] = cloud.pose.translation
+        t = time.perf_counter()
+        failures = self.gravity.failures
+        verdict = self.gravity.update(cloud, pose[:3, :3], cloud.points)
+        c["gravity_failures"] += self.gravity.failures - failures
+        self._gravity_verdict(cloud, verdict)
+        timings["gravity"] = time.perf_counter() - t
+        t = time.perf_counter()
+        touched = self.map.integrate(cloud.points, pose, stamp)
+        self.last_stamp = stamp
+        rotation = self.gravity.rotation
+        self._widen_pending(touched, rotation)
+        timings["map"] = time.perf_counter() - t
+        c["scans_processed"] += 1
+        self.posed, self.frame = cloud.pose is not None, cloud.frame_id
+        if not self._detection_due(stamp):
+            return None
+        t = time.perf_counter()
+        raw = self.map.points()
+        # Scans with gravity in their pose (and no correction yet): the map frame is level.
+        points = raw if np.array_equal(rotation, np.eye(3)) else transform_points(raw, rotation)
+        timings["points"] = time.perf_counter() - t
+        region, self._pending = self._pending, _empty_box()
+        frame = self.cfg.frame_id if cloud.pose is not None else cloud.frame_id
+        return Job(
+            points=points,
+            rotation=rotation,
+            sensor_z=float((rotation @ pose[:3, 3])[2]),
+            stamp=stamp,
+            frame=frame,
+            generation=self.generation,
+            source=(self.generation, getattr(self.map, "version", None)),
+            region=region,
+            timings=timings,
+        )
+
+    def map_cloud(self, max_points: int, seq: int) -> PointCloud | None:
+        """The map as a PointCloud in the results' frame: one point per voxel (its points'
+        mean; at most ``max_points``, every k-th); None before the first scan."""
+        if self.last_stamp is None or not hasattr(self.map, "centroids"):
+            return None
+        pts = transform_points(self.map.centroids(max_points), self.gravity.rotation)
+        frame = self.cfg.frame_id if self.posed else self.frame
+        return PointCloud.from_xyz(pts.astype(np.float32), self.last_stamp, frame, seq)
+
+    def _gravity_verdict(self, cloud: PointCloud, verdict: Verdict) -> None:
+        """Count a scan's gravity outlier; log the first one and every new up adopted."""
+        if verdict is Verdict.OUTLIER:
+            self.ingest_counters["gravity_outliers"] += 1
+            if self.ingest_counters["gravity_outliers"] == 1:
+                self.log.warning(
+                    "%s: scan seq %d: its gravity is more than %g deg from the map's up %s "
+                    "(%s): not used (logged once; counted in gravity_outliers)",
+                    self.cfg.name,
+                    cloud.seq,
+                    self.cfg.gravity_max_angle_deg,
+                    np.round(self.gravity.up, 3).tolist(),
+                    self.gravity.source,
+                )
+        elif verdict is Verdict.ADOPTED:
+            self.log.info(
+                "%s: the map's up is %s, from %d scans' gravity that agree",
+                self.cfg.name,
+                np.round(self.gravity.up, 3).tolist(),
+                self.cfg.gravity_min_agreeing,
+            )
+
+    def _detection_due(self, stamp: float) -> bool:
+        rate = self.cfg.detection_rate
+        due = (
+            rate <= 0 or self._last_detect is None or stamp - self._last_detect >= 1.0 / rate - 1e-6
+        )
+        if due:
+            self._last_detect = stamp
+        return due
+
+    def _widen_pending(self, touched: Any, rotation: np.ndarray) -> None:
+        """Add the x, y box (detection frame) of what ``touched`` (map frame) changed."""
+        lo, hi = np.asarray(touched.lo, float), np.asarray(touched.hi, float)
+        corners = []
+        if np.all(lo <= hi):
+            corners.append(np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T)
+        removed = np.asarray(getattr(touched, "removed", np.zeros((0, 3))), float)
+        if len(removed):
+            size = float(self.cfg.map.voxel_size)
+            rlo, rhi = removed.min(axis=0) * size, (removed.max(axis=0) + 1) * size
+            corners.append(np.array(np.meshgrid(*zip(rlo, rhi, strict=True))).reshape(3, -1).T)
+        if corners:
+            c = np.concatenate(corners) @ rotation.T
+            lo2, hi2 = c[:, :2].min(axis=0), c[:, :2].max(axis=0)
+            self._pending = (np.minimum(self._pending[0], lo2), np.maximum(self._pending[1], hi2))
+
+    # ---------------------------------------------------------------- detecting side
+
+    def _reset_detection(self) -> None:
+        self.surface_tracker = SurfaceTracker(min_iou=0.2, height_tolerance=0.05, max_misses=3)
+        self.cluster_tracker = ClusterTracker(cell_size=0.02, min_iou=0.2, max_misses=3)
+        self._items: Items | None = None
+        self._items_rotation: np.ndarray | None = None
+        self._items_source: tuple[int, int | None] | None = None
+        self._out_seq = 0
+        self._seen_generation = self.generation
+
+    def detect(self, job: Job) -> NodeOutput:
+        """Detection, stable ids and messages of one job (see the module docstring)."""
+        if job.generation != self._seen_generation:
+            self._reset_detection()  # the map was reset: ids and previous detection go
+            self._seen_generation = job.generation
+        timings = dict(job.timings)
+        below = job.sensor_z - _UNDER_SENSOR_M  # surfaces from here up are not published
+        prev = self._items
+        same_frame = self._items_rotation is not None and np.allclose(
+            self._items_rotation, job.rotation, atol=1e-9
+        )
+        # Detection is a function of the map's points alone: on an unchanged map the previous
+        # one is the answer, unless the sensor rose and surfaces it left without free space
+        # are now below it.
+        reused = bool(
+            same_frame
+            and prev is not None
+            and prev.has_free_space_below(below)
+            and job.source[1] is not None
+            and self._items_source == job.source
+        )
+        items = prev if reused else None
+        if items is None and self.incremental and prev is not None and same_frame:
+            lo, hi = job.region
+            items = incremental.regional(job.points, prev, lo, hi, self.params, free_below=below)
+        is_incremental = items is not None and not reused
+        if items is None:
+            items = incremental.full(job.points, self.params, free_below=below)
+        if not reused:
+            timings.update(items.timings)
+        self._items, self._items_rotation, self._items_source = items, job.rotation, job.source
+        c = self.detect_counters
+        c["detections"] += 1
+        c["incremental_detections"] += int(is_incremental)
+        c["detections_reused"] += int(reused)
+        out = self._messages(items, job, timings)
+        out.incremental, out.reused = is_incremental, reused
+        return out
+
+    def _messages(self, items: Items, job: Job, timings: dict[str, float]) -> NodeOutput:
+        """Stable ids and both messages of a detection."""
+        t = time.perf_counter()
+        # Horizontal planes above the sensor are ceilings and undersides, not supports.
+        keep = [s for s in items.surfaces if s.height < job.sensor_z - _UNDER_SENSOR_M]
+        kept_ids = {s.id for s in keep}
+        s_up = self.surface_tracker.update_surfaces(keep)
+        sid = {s.id: int(i) for s, i in zip(keep, s_up.ids, strict=True)}
+        surface_of = np.array(
+            [sid.get(c.surface_id, -1) if c.surface_id is not None else -1 for c in items.clusters],
+            dtype=np.int64,
+        )
+        c_up = self.cluster_tracker.update_clusters(items.clusters, surface_of)
+        timings["track"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        tracks = self.surface_tracker.tracks
+        safe = [
+            is_safe(
+                s, self.params.safe, tracks.get(int(i), {}).get("hits", 0), self.cfg.safe_min_hits
+            )
+            for s, i in zip(keep, s_up.ids, strict=True)
+        ]
+        self._out_seq += 1
+        free = [f for f in items.free if f.surface_id in kept_ids]
+        surfaces = SupportSurfaces.from_detection(
+            keep,
+            free,
+            job.stamp,
+            job.frame,
+            self._out_seq,
+            ids=[int(i) for i in s_up.ids],
+            safe=safe,
+        )
+        clusters = [
+            c
+            if c.surface_id is None or c.surface_id in kept_ids
+            else dataclasses.replace(c, surface_id=None)
+            for c in items.clusters
+        ]
+        obstacles = ObstacleClusters.from_detection(
+            clusters,
+            job.stamp,
+            job.frame,
+            self._out_seq,
+            ids=[int(i) for i in c_up.ids],
+            surface_ids=sid,
+            points=items.cluster_points,
+        )
+        timings["messages"] = time.perf_counter() - t
+        self.last_counts = (len(kept_ids), len(clusters))
+        return NodeOutput(
+            surfaces,
+            obstacles,
+            timings,
+            new_ids={"surfaces": list(s_up.new), "obstacles": list(c_up.new)},
+            gone_ids={"surfaces": list(s_up.gone), "obstacles": list(c_up.gone)},
+            items=items,
+        )

@@ -1,0 +1,45 @@
+"""The one hand-off between the node's receiving and detecting threads: the latest job."""
+
+from __future__ import annotations
+
+import threading
+
+from supportnode.node.core import Job
+
+__all__ = ["Mailbox"]
+
+
+class Mailbox:
+    """Holds at most one `Job`, the newest. A job put while another waits replaces it (the
+    detector was busy: the older scan is skipped, counted, and its changed region joins the
+    newer one's, so the next detection covers both; the map has every scan either way)."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._job: Job | None = None
+        self._closed = False
+        self.skipped = 0  # jobs replaced before a detection took them
+
+    def put(self, job: Job) -> None:
+        """Leave ``job`` for the detector, replacing one it has not taken."""
+        with self._cond:
+            if self._job is not None:
+                self.skipped += 1
+                job = job.merged_with(self._job)
+            self._job = job
+            self._cond.notify()
+
+    def take(self, timeout: float) -> Job | None:
+        """The waiting job (removed), waiting up to ``timeout`` s; None if none came or the
+        mailbox is closed."""
+        with self._cond:
+            if self._job is None and not self._closed:
+                self._cond.wait(timeout)
+            job, self._job = self._job, None
+            return None if self._closed else job
+
+    def close(self) -> None:
+        """Wake the detector for good (the node stops)."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
