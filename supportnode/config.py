@@ -79,6 +79,8 @@ REMOVED_KEYS: dict[str, str] = {
     + _NOTHING_TO_SET
     + " (each scan's clearing runs in its merge)",
     "node.queue": "removed in 0.2: the node keeps the latest scan, " + _NOTHING_TO_SET,
+    # read by nothing: the point normals that surfaces use have their own neighbour counts
+    "normals": "removed in 0.2: use surfaces.normal_filter_k and surfaces.clutter_normal_k",
 }
 
 

@@ -197,13 +197,6 @@ class FreeSpaceParams:
 
 
 @dataclass(frozen=True)
-class NormalParams:
-    """Per-point normal estimation by k-NN covariance."""
-
-    k: int = param(30, "neighbours per point", min=3, max=500)
-
-
-@dataclass(frozen=True)
 class GravityParams:
     """Gravity alignment when no IMU gives the up direction."""
 
@@ -247,7 +240,6 @@ class DetectParams:
     surfaces: SurfaceParams = field(default_factory=SurfaceParams)
     objects: ObjectParams = field(default_factory=ObjectParams)
     freespace: FreeSpaceParams = field(default_factory=FreeSpaceParams)
-    normals: NormalParams = field(default_factory=NormalParams)
     gravity: GravityParams = field(default_factory=GravityParams)
     safe: SafeParams = field(default_factory=SafeParams)
     # A lambda because NodeParams is defined below (appended sections keep this file's order).

@@ -23,7 +23,7 @@ from supportnode.config import (
     parse_override,
 )
 from supportnode.errors import ConfigError, SupportNodeError
-from supportnode.params import DetectParams, NormalParams, ObjectParams, SurfaceParams
+from supportnode.params import DetectParams, FreeSpaceParams, ObjectParams, SurfaceParams
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 
@@ -100,7 +100,7 @@ def test_yaml_overrides_defaults(tmp_path: Path) -> None:
     assert isinstance(cfg.surfaces.max_step, float)
     assert cfg.objects == dataclasses.replace(ObjectParams(), k=50)
     assert cfg.gravity.up_hint == (0.0, 0.0, 1.0)
-    assert cfg.normals == NormalParams()
+    assert cfg.freespace == FreeSpaceParams()
 
 
 def test_null_section_means_defaults(tmp_path: Path) -> None:
@@ -144,9 +144,11 @@ def test_report_overrides_from_the_brief() -> None:
 
 
 def test_pathlike_and_root_type(tmp_path: Path) -> None:
-    path = write(tmp_path, "k: 12\n")
-    assert load_config(path, (), NormalParams) == NormalParams(k=12)
-    assert load_config(path, ["k=13"], root_type=NormalParams) == NormalParams(k=13)
+    path = write(tmp_path, "margin: 0.12\n")
+    assert load_config(path, (), FreeSpaceParams) == FreeSpaceParams(margin=0.12)
+    assert load_config(path, ["margin=0.13"], root_type=FreeSpaceParams) == FreeSpaceParams(
+        margin=0.13
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -340,9 +342,9 @@ def test_duplicate_key(tmp_path: Path) -> None:
 def test_merge_keys_rejected(tmp_path: Path) -> None:
     path = write(tmp_path, "base: &b {k: 3}\nobjects:\n  <<: *b\n")
     assert config_error(path) == f"{path}:1: unknown key 'base' (known keys: " + (
-        "surfaces, objects, freespace, normals, gravity, safe, node)"
+        "surfaces, objects, freespace, gravity, safe, node)"
     )
-    path = write(tmp_path, "objects: &b\n  k: 3\nnormals:\n  <<: *b\n")
+    path = write(tmp_path, "objects: &b\n  k: 3\nfreespace:\n  <<: *b\n")
     assert config_error(path) == f"{path}:4: YAML merge keys ('<<') are not supported"
 
 
@@ -680,3 +682,14 @@ def test_aliases_are_followed_without_expansion(tmp_path: Path) -> None:
     path = write(tmp_path, "surfaces:\n  voxel_size: &v [0.2, 0.2, 0.1]\ngravity:\n  up_hint: *v\n")
     cfg = load_config(path)
     assert cfg.surfaces.voxel_size == cfg.gravity.up_hint == (0.2, 0.2, 0.1)
+
+
+def test_removed_normals_section_names_its_replacement(tmp_path: Path) -> None:
+    """normals.k was read by nothing; a file that still sets it is told what to use."""
+    path = write(tmp_path, "normals:\n  k: 20\n")
+    assert config_error(path) == (
+        f"{path}:1: key 'normals' was removed in 0.2: use surfaces.normal_filter_k and "
+        "surfaces.clutter_normal_k"
+    )
+    with pytest.raises(ConfigError, match="normals.k=20: key 'normals' was removed in 0.2: use surfaces"):
+        load_config(None, ["normals.k=20"])
