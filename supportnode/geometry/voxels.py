@@ -37,6 +37,25 @@ def argsort_keys(keys: np.ndarray, top: int | None = None) -> np.ndarray:
     return order
 
 
+def _argsort_runs(keys: np.ndarray, top: int) -> np.ndarray:
+    """:func:`argsort_keys` of (N,) keys in ``0..top``, the same permutation, sorting runs of
+    equal consecutive keys rather than keys: a map's points come grouped by its own (finer)
+    voxels, a few runs per voxel, and a run's points stay in order in a stable sort."""
+    n = len(keys)
+    new = np.empty(n, dtype=bool)
+    new[:1] = True
+    np.not_equal(keys[1:], keys[:-1], out=new[1:])
+    first = np.flatnonzero(new)
+    if len(first) > n // 2:  # runs too short to pay off
+        return argsort_keys(keys, top=top)
+    by_run = argsort_keys(keys[first], top=top)
+    length = np.diff(np.append(first, n))[by_run]
+    # Run r of the sorted runs covers sorted positions [at_r, at_r + length_r) and holds
+    # points first_r ... first_r + length_r - 1.
+    shift = first[by_run] - (np.cumsum(length) - length)
+    return np.repeat(shift, length) + np.arange(n)
+
+
 def voxel_keys(points: np.ndarray, size: np.ndarray) -> np.ndarray:
     """Integer voxel coordinates floor(p / size): (N, 3) float -> (N, 3) int64."""
     keys = np.floor(np.asarray(points, dtype=np.float64) / size)
@@ -208,9 +227,7 @@ class VoxelGrid:
 
 
 def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) -> VoxelGrid:
-    """Group (N, 3) points into voxels of ``size`` (3,) metres and accumulate moments.
-
-    Raises InputError on non-finite points, or keys or a grid too large to index."""
+    """Group (N, 3) points into voxels of ``size`` (3,) metres and accumulate moments."""
     pts = np.asarray(points, dtype=np.float64)
     size = np.asarray(size, dtype=np.float64).reshape(3)
     n = len(pts)
@@ -219,35 +236,6 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
         f = np.zeros(0)
         keys = np.zeros((0, 3), np.int64)
         return VoxelGrid(size, keys, e, e, np.zeros((0, 3)), np.zeros((0, 6)), e, e, [f, f, f])
-    # Imported here: importing the geometry (as the wire's types do) must not load numba.
-    from supportnode.kernels.voxelgrid import group_dense, voxel_bounds
-
-    lo, hi, bad = voxel_bounds(pts, size)
-    if bad:
-        raise InputError(f"{bad} of {n} points are not finite (NaN/inf): drop them first")
-    if max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40:
-        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
-    origin = lo.astype(np.int64)
-    dims = (hi - lo).astype(np.int64) + 1
-    if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
-        raise InputError("voxel grid too large to index (extent / voxel size overflows)")
-    top = int(np.prod(dims)) - 1
-    if top < max(8 * n, 1 << 20):
-        # Few possible keys (the usual case: a room is ~1e5 voxels): a counting sort and the
-        # moments in compiled loops, two passes over the points where numpy takes a dozen.
-        keys, counts, point_voxel, order, starts, local3, sums, outer = group_dense(
-            pts, size, origin, dims
-        )
-        local = [local3[0], local3[1], local3[2]]
-        return VoxelGrid(size, keys, counts, point_voxel, sums, outer, order, starts, local)
-    return _voxelize_sorted(pts, size, origin, dims, top)
-
-
-def _voxelize_sorted(
-    pts: np.ndarray, size: np.ndarray, origin: np.ndarray, dims: np.ndarray, top: int
-) -> VoxelGrid:
-    """:func:`voxelize` of an extent too large to count in: a radix sort of linear keys."""
-    n = len(pts)
     # Column by column, straight from the (strided) input columns: no (N, 3) copy. Every
     # (N,) temporary is done in place or reused: fresh pages cost more than the arithmetic
     # on them (a page fault each), so the peak memory of this step sets much of its time.
@@ -255,6 +243,14 @@ def _voxelize_sorted(
     for a in range(3):
         q = pts[:, a] / size[a]
         kcols.append(np.floor(q, out=q))
+    lo = np.array([c.min() for c in kcols])
+    hi = np.array([c.max() for c in kcols])
+    if max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40:
+        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
+    origin = lo.astype(np.int64)
+    dims = (hi - lo).astype(np.int64) + 1
+    if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+        raise InputError("voxel grid too large to index (extent / voxel size overflows)")
     # lin = ((k0 * d1) + k1) * d2 + k2 of the origin-relative keys k, in one buffer.
     lin = kcols[0].astype(np.int64)
     lin -= origin[0]
@@ -270,19 +266,34 @@ def _voxelize_sorted(
     for a in range(3):
         kcols[a] *= size[a]
         np.subtract(pts[:, a], kcols[a], out=kcols[a])
-    # Sorting is the one O(N log N) step; everything after it is contiguous reductions.
-    order = argsort_keys(lin, top=top)
-    lin_sorted = np.take(lin, order)
-    del lin
-    new = np.empty(n, dtype=bool)
-    new[0] = True
-    np.not_equal(lin_sorted[1:], lin_sorted[:-1], out=new[1:])
-    starts = np.flatnonzero(new)
-    counts = np.diff(np.append(starts, n))
-    point_voxel = np.empty(n, dtype=np.int64)
-    point_voxel[order] = np.cumsum(new) - 1
-    lin_of_voxel = lin_sorted[starts]
-    del lin_sorted, new
+    top = int(np.prod(dims)) - 1
+    if top < max(8 * n, 1 << 20):
+        # Few possible keys (the usual case: a room is ~1e5 voxels): a counting pass ranks
+        # the occupied keys, and sorting the points by that rank (< 2^16 voxels: one 16-bit
+        # radix pass) replaces the sort of the linear keys; the rank is each point's voxel.
+        occupied = np.bincount(lin, minlength=top + 1)
+        lin_of_voxel = np.flatnonzero(occupied)
+        counts = occupied[lin_of_voxel]
+        rank = occupied  # read at occupied keys only: its other entries may stay
+        rank[lin_of_voxel] = np.arange(len(lin_of_voxel))
+        point_voxel = np.take(rank, lin)
+        del rank, occupied, lin
+        order = _argsort_runs(point_voxel, top=len(lin_of_voxel) - 1)
+        starts = np.cumsum(counts) - counts
+    else:
+        # Sorting is the one O(N log N) step; everything after it is contiguous reductions.
+        order = argsort_keys(lin, top=top)
+        lin_sorted = np.take(lin, order)
+        del lin
+        new = np.empty(n, dtype=bool)
+        new[0] = True
+        np.not_equal(lin_sorted[1:], lin_sorted[:-1], out=new[1:])
+        starts = np.flatnonzero(new)
+        counts = np.diff(np.append(starts, n))
+        point_voxel = np.empty(n, dtype=np.int64)
+        point_voxel[order] = np.cumsum(new) - 1
+        lin_of_voxel = lin_sorted[starts]
+        del lin_sorted, new
     rem, kz = np.divmod(lin_of_voxel, dims[2])
     kx, ky = np.divmod(rem, dims[1])
     vkeys = np.stack([kx, ky, kz], axis=1) + origin
