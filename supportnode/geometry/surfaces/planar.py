@@ -246,6 +246,9 @@ def _label_points_planar(
     in its own column: its own voxel, or the one just below or above (a noisy or
     layer-straddling surface spills into neighbouring layers). index:
     ``KeyIndex.build(grid.keys)``."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.planes import label_by_planes
+
     n = len(grid.order)
     # int32 and no (N,) float fill: fresh pages cost more here than the arithmetic on them.
     sorted_labels = np.full(n, -1, dtype=np.int32)
@@ -258,7 +261,7 @@ def _label_points_planar(
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
     lx, ly, lz = grid.local
     best = np.empty(n)  # distance of each labelled point to its plane; read where labelled
-    for dz in (0, -1, 1):  # three column neighbours, each vectorised over voxels and points
+    for dz in (0, -1, 1):  # three column neighbours, each one compiled loop over the points
         if dz == 0:
             vsel = sv
             t = sv
@@ -274,23 +277,18 @@ def _label_points_planar(
         corner = grid.keys[vsel] * grid.size
         m = planes.mean[t]
         a = (m[:, 2] - corner[:, 2]) + bx * (corner[:, 0] - m[:, 0]) + by * (corner[:, 1] - m[:, 1])
-        cnt = grid.counts[vsel]
-        if len(vsel) == len(grid.counts):
-            pos = np.arange(n)
-        else:
-            pos = np.repeat(grid.starts[vsel] - (np.cumsum(cnt) - cnt), cnt) + np.arange(cnt.sum())
-        dist = np.abs(
-            lz[pos]
-            - (np.repeat(a, cnt) + np.repeat(bx, cnt) * lx[pos] + np.repeat(by, cnt) * ly[pos])
-        )
-        # Per voxel, then repeated: the tolerance of each voxel's surface, not a gather per point.
+        # Per voxel: the tolerance of each voxel's surface; a labelled point changes surface
+        # only for a nearer plane.
         surf_v = surface_of_voxel[t]
-        better = dist <= np.repeat(tol_by_comp[surf_v], cnt)
-        if dz != 0:  # a labelled point changes surface only for a nearer plane
-            seen = np.flatnonzero(better & (sorted_labels[pos] >= 0))
-            better[seen] = dist[seen] < best[pos[seen]]
-        idx = np.flatnonzero(better)
-        at = pos[idx]
-        sorted_labels[at] = np.repeat(surf_v, cnt)[idx]
-        best[at] = dist[idx]
+        label_by_planes(
+            grid.local,
+            grid.starts[vsel],
+            grid.counts[vsel],
+            (a, bx, by),
+            surf_v,
+            tol_by_comp[surf_v],
+            sorted_labels,
+            best,
+            nearer=dz != 0,
+        )
     return sorted_labels
