@@ -24,6 +24,9 @@ def _summarise(
     returns the surfaces and each component's surface id: ``lut[sorted_labels]`` (int32,
     its last entry -1 for the points on none). widths: footprint widths already
     measured, by ``_cells_key`` of the footprint (see :func:`_filter_components`)."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.runs import range_extremes, run_moments
+
     at = np.flatnonzero(sorted_labels >= 0)
     if len(at) == 0:
         return [], np.full(1, -1, dtype=np.int32)
@@ -53,32 +56,18 @@ def _summarise(
     cut[:1] = True
     cut[1:] = (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])
     run = np.flatnonzero(cut)
-    local = [c[at[mixed]] for c in grid.local]
-
-    def reduce_runs(ufunc: np.ufunc, values: list[np.ndarray], pure_values: np.ndarray):
-        if len(run) == 0:  # reduceat needs at least one run
-            return pure_values
-        mixed_values = np.stack([ufunc.reduceat(v, run) for v in values], axis=1)
-        return np.concatenate([pure_values, mixed_values])
-
+    # The mixed runs' moments and extremes read in place (compiled: no gathered columns).
+    m_sum, m_outer, m_min, m_max = run_moments(grid.local, at[mixed], run)
     run_g = np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], g[run]])
     run_vox = np.concatenate([pure_vox, vox[run]])
     run_n = np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))])
     corner = grid.keys[run_vox] * grid.size
-    r_sum = reduce_runs(np.add, local, grid.sums[pure_vox])
-    r_outer = reduce_runs(
-        np.add, [local[a] * local[b] for a, b in OUTER_INDEX], grid.outer[pure_vox]
-    )
-    # Extremes of the pure voxels from their own points.
-    if len(pure_vox):
-        pure_local = [c[at[~mixed]] for c in grid.local]
-        bounds = np.cumsum(grid.counts[pure_vox]) - grid.counts[pure_vox]
-        v_min = np.stack([np.minimum.reduceat(c, bounds) for c in pure_local], axis=1)
-        v_max = np.stack([np.maximum.reduceat(c, bounds) for c in pure_local], axis=1)
-    else:
-        v_min = v_max = np.zeros((0, 3))
-    r_min = reduce_runs(np.minimum, local, v_min) + corner
-    r_max = reduce_runs(np.maximum, local, v_max) + corner
+    r_sum = np.concatenate([grid.sums[pure_vox], m_sum])
+    r_outer = np.concatenate([grid.outer[pure_vox], m_outer])
+    # Extremes of the pure voxels from their own points (all of the voxel's).
+    v_min, v_max = range_extremes(grid.local, grid.starts[pure_vox], grid.counts[pure_vox])
+    r_min = np.concatenate([v_min, m_min]) + corner
+    r_max = np.concatenate([v_max, m_max]) + corner
 
     counts = np.bincount(run_g, weights=run_n, minlength=s_count)
     abs_sum = r_sum + corner * run_n[:, None]
