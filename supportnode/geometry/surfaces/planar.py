@@ -259,7 +259,6 @@ def _label_points_planar(
     # above is one (ascending, as keys + 1 in z keep the voxels' order).
     up, down = index.neighbours_many(sv, [(0, 0, 1), (0, 0, -1)], grid.keys)
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
-    lx, ly, lz = grid.local
     best = np.empty(n)  # distance of each labelled point to its plane; read where labelled
     for dz in (0, -1, 1):  # three column neighbours, each one compiled loop over the points
         if dz == 0:
