@@ -1,9 +1,9 @@
 """Per-point normals from the covariance of the k nearest neighbours.
 
 One exact k-nearest-neighbour search for all points (in the tree's leaf order, within a search
-radius estimated from a sample), covariances from per-point moments summed over each point's
-neighbours by a sparse product (chunked so memory stays bounded, the next chunk's search running
-meanwhile), and the closed-form 3x3 eigen solver of :mod:`supportnode.geometry.linalg`. No
+radius estimated from a sample), covariances summed over each point's neighbours in compiled
+code (chunked so memory stays bounded, the next chunk's search running meanwhile), and the
+closed-form 3x3 eigen solver of :mod:`supportnode.geometry.linalg`. No
 Python loop runs per point.
 
 The report's optional normal filter (k=30, 160 s on 108k points there) is
@@ -18,7 +18,6 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 
 import numpy as np
-from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from supportnode.errors import InputError
@@ -26,14 +25,9 @@ from supportnode.geometry.linalg import sym3_eigen_entries
 
 __all__ = ["estimate_normals", "filter_vertical_normals", "normals_at"]
 
-# Neighbour indices per chunk: 600k is 20k points at k=30, a 7 MB sparse selection matrix that
-# stays in cache (measured as fast as one pass over 108k points, with a fifth of the memory).
+# Neighbour indices per chunk: 600k is 20k points at k=30 (5 MB of indices): bounded memory,
+# and the next chunk's search overlaps this one's covariances.
 _CHUNK_VALUES = 600_000
-# The selection matrices' entries, all ones: allocated once (a fresh 5 MB array page-faults).
-_ONES = np.ones(_CHUNK_VALUES, dtype=np.float64)
-_ONES.flags.writeable = False
-# Moment columns after x, y, z: the six distinct products of a symmetric 3x3 matrix.
-_OUTER = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 # Queries below this are searched on one thread: a k-d tree query of 500 points (k = 10) took
 # 0.65 ms on one thread and 0.88 ms on all (two) cores, which first have to be started.
 _PARALLEL_MIN_QUERIES = 2048
@@ -65,6 +59,9 @@ def normals_at(
     tree: ``cKDTree(points)``; points: (N, 3) float64 m; query: (M, 3) float64 m.
     Returns ``(normals (M, 3) unit, sign arbitrary; curvature (M,) in [0, 1/3])``.
     """
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.neighbourhoods import neighbourhood_covariances
+
     m = query.shape[0]
     n = points.shape[0]
     k = int(min(k, n))
@@ -99,36 +96,21 @@ def normals_at(
     single = m <= chunk
     with nullcontext() if single else ThreadPoolExecutor(max_workers=1) as pool:
         pending = None if single else pool.submit(neighbours, 0)
-        # The nine moments (x, y, z, xx, yy, zz, xy, xz, yz) of every point, summed over each
-        # query's neighbours by one sparse (c, N) x (N, 9) product: it reads each neighbour's
-        # 72-byte row once instead of materialising (c, k) gathers and differences per
-        # coordinate, 2-3x faster. Coordinates are taken about the centre of the points'
-        # bounding box, so the cancellation in E[pp'] - E[p]E[p]' is about eps * R^2 with R
-        # the half-extent of the cloud: 2e-12 m^2 for R = 100 m against neighbourhood
+        # Each query's neighbourhood covariance summed as its neighbours are read (compiled:
+        # no selection matrix, no gathers). Coordinates are taken about the centre of the
+        # points' bounding box, so the cancellation in E[pp'] - E[p]E[p]' is about eps * R^2
+        # with R the half-extent of the cloud: 2e-12 m^2 for R = 100 m against neighbourhood
         # variances of 1e-5 m^2 and more (1e-7 rad of normal), wherever the cloud lies.
         # Column by column: numpy reduces (N, 3) arrays along axis 0 20x slower than 1-D.
         origin = np.array([(points[:, j].min() + points[:, j].max()) / 2.0 for j in range(3)])
         c = points - origin
-        moments = np.empty((n, 9), dtype=np.float64)
-        moments[:, :3] = c
-        for col, (a, b) in enumerate(_OUTER):
-            np.multiply(c[:, a], c[:, b], out=moments[:, 3 + col])
-        ones = _ONES if len(_ONES) >= chunk * k else np.ones(chunk * k, dtype=np.float64)
         for start in range(0, m, chunk):  # loop over chunks of ~20k points, not over points
             stop = min(start + chunk, m)
-            rows = stop - start
             idx = neighbours(start) if pending is None else pending.result()
             if stop < m:
                 pending = pool.submit(neighbours, stop)
-            pick = csr_matrix(
-                (ones[: rows * k], idx.ravel(), np.arange(0, rows * k + 1, k)),
-                shape=(rows, n),
-            )
-            s = (pick @ moments) / k  # (rows, 9) neighbourhood means of the moments
-            # The covariance's six entries as columns, in _OUTER order (no (rows, 3, 3) stack).
-            evals, vec = sym3_eigen_entries(
-                *(s[:, 3 + col] - s[:, a] * s[:, b] for col, (a, b) in enumerate(_OUTER))
-            )
+            # The six entries as columns, xx, yy, zz, xy, xz, yz: no (rows, 3, 3) stack.
+            evals, vec = sym3_eigen_entries(*neighbourhood_covariances(c, idx))
             evals = np.maximum(evals, 0.0)  # round-off can make the smallest slightly negative
             total = evals.sum(axis=1)
             safe = np.where(total > 0, total, 1.0)

@@ -1,0 +1,185 @@
+"""Cluttered voxels beside a surface: grown into when their points lie on its plane,
+and their tilted points (k-NN normals) taken off again."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.normals import normals_at
+from supportnode.geometry.surfaces.groups import _median_by_group
+from supportnode.geometry.surfaces.planar import _Planes
+from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid, layered_offsets
+from supportnode.params import SurfaceParams
+
+
+def _absorb_clutter(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    tolerance: np.ndarray,
+    params: SurfaceParams,
+) -> np.ndarray:
+    """Grow surfaces into the cluttered voxels beside them, in place; returns the voxels added.
+
+    A voxel holding a board and the foot of a lamp, or a floor and a wall's base, fails the
+    flatness test although part of it is the surface. It joins a neighbouring surface voxel
+    when enough of its points lie on that voxel's plane (carried over, not refitted, so growth
+    cannot creep up an object) and they spread over the cell (not one edge line). index:
+    ``KeyIndex.build(grid.keys)``."""
+    steps = params.absorb_steps
+    if steps <= 0 or not (surface_of_voxel >= 0).any():
+        return np.zeros(0, dtype=np.int64)
+    offsets = layered_offsets(8)
+    offsets = np.concatenate([offsets, -offsets])
+    min_spread = 0.25 * np.asarray(params.voxel_size[:2])
+    frontier = np.flatnonzero(surface_of_voxel >= 0)
+    added = []
+    for _ in range(steps):  # a few rings of voxels, each step vectorised
+        j = index.neighbours_many(frontier, offsets, grid.keys)
+        ok = j >= 0
+        src, dst = np.broadcast_to(frontier, j.shape)[ok], j[ok]
+        free = (surface_of_voxel[dst] < 0) & (grid.counts[dst] > params.p_min)
+        src, dst = src[free], dst[free]
+        if len(src) == 0:
+            break
+        # One trial per (voxel, surface): neighbours on one surface share its plane.
+        pair = dst * (int(surface_of_voxel.max()) + 1) + surface_of_voxel[src]
+        _, first_of_pair = np.unique(pair, return_index=True)
+        src, dst = src[first_of_pair], dst[first_of_pair]
+        # Every point of each candidate voxel against the plane of the surface voxel beside it,
+        # read from the grid's contiguous corner-relative columns (1-D gathers of runs).
+        n_pts = grid.counts[dst]
+        first = np.cumsum(n_pts) - n_pts
+        rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
+        pos = np.repeat(grid.starts[dst], n_pts) + rank
+        # The plane's point relative to the candidate voxel's corner, then per point.
+        rel = planes.mean[src] - grid.keys[dst] * grid.size
+        nrm = planes.normal[src]
+        # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
+        off = [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)]
+        dist = np.abs(
+            off[0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
+            + off[1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
+            + off[2]
+        )
+        inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
+        n_in = np.add.reduceat(inlier.astype(np.int64), first)
+        # The spread and level tests only for the trials with inliers enough (a few in ten).
+        sel = np.flatnonzero((n_in > params.p_min) & (n_in >= params.absorb_min_fraction * n_pts))
+        if len(sel) == 0:
+            break
+        n_sel = n_pts[sel]
+        first_sel = np.cumsum(n_sel) - n_sel
+        at = np.repeat(first[sel] - first_sel, n_sel) + np.arange(n_sel.sum())
+        off = [o[at] for o in off]
+        inlier = inlier[at]
+        lo = np.stack(
+            [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first_sel) for a in range(2)],
+            axis=1,
+        )
+        hi = np.stack(
+            [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first_sel) for a in range(2)],
+            axis=1,
+        )
+        # The inliers must themselves be a level patch: a ramp crosses a level plane in a
+        # band that would otherwise pass, voxel after voxel along its contour.
+        w = inlier.astype(np.float64)
+        cnt = np.maximum(n_in[sel], 1)
+        mean_in = [np.add.reduceat(off[a] * w, first_sel) / cnt for a in range(3)]
+        # The inliers' covariance entries as columns, in OUTER_INDEX order.
+        _, n_in_plane = sym3_eigen_entries(
+            *(
+                np.add.reduceat(off[a] * off[b] * w, first_sel) / cnt - mean_in[a] * mean_in[b]
+                for a, b in OUTER_INDEX
+            )
+        )
+        level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
+        good = np.zeros(len(dst), dtype=bool)
+        good[sel] = np.all(hi - lo >= min_spread, axis=1) & level
+        if not good.any():
+            break
+        # One surface per voxel: the neighbour explaining most of its points.
+        cand = np.flatnonzero(good)
+        order = np.lexsort((-n_in[cand], dst[cand]))
+        cand = cand[order]
+        keep = np.r_[True, dst[cand][1:] != dst[cand][:-1]]
+        cand = cand[keep]
+        j, s_vox = dst[cand], src[cand]
+        surface_of_voxel[j] = surface_of_voxel[s_vox]
+        planes.mean[j] = planes.mean[s_vox]
+        planes.normal[j] = planes.normal[s_vox]
+        planes.roughness[j] = planes.roughness[s_vox]
+        added.append(j)
+        frontier = j
+    return np.concatenate(added) if added else np.zeros(0, dtype=np.int64)
+
+
+def _voxels_to_vet(
+    grid: VoxelGrid,
+    sorted_labels: np.ndarray,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    absorbed: np.ndarray,
+    params: SurfaceParams,
+) -> np.ndarray:
+    """Voxels whose surface points get the k-NN normal check: the cluttered voxels a surface
+    grew into, and, on smooth surfaces, voxels that are no surface voxel themselves but have
+    points within tolerance of the plane of the one above or below: the side face of a board
+    or a floor slab just under its top edge. (On a noisy surface that layer holds the noise,
+    whose k-NN normals scatter: it is left alone.)"""
+    vet = absorbed[surface_of_voxel[absorbed] >= 0]
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    if len(sv) == 0:
+        return vet
+    comp = surface_of_voxel[sv]
+    rough = _median_by_group(planes.roughness[sv], comp, int(comp.max()) + 1)
+    smooth = 30.0 * rough <= params.point_tolerance
+    label = np.maximum.reduceat(sorted_labels, grid.starts)  # a surface of the voxel, or -1
+    beside = (surface_of_voxel < 0) & (label >= 0)
+    beside[beside] = smooth[label[beside]]
+    return np.union1d(vet, np.flatnonzero(beside))
+
+
+def _reject_tilted_clutter(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    sorted_labels: np.ndarray,
+    vetted: np.ndarray,
+    params: SurfaceParams,
+) -> int:
+    """Unlabel, in place, surface points of the ``vetted`` voxels whose k-NN normal is tilted.
+
+    sorted_labels: (N,) labels in the grid's voxel order; index: ``KeyIndex.build(grid.keys)``.
+    The report's normal filter, run only where it matters (its own suggested improvement):
+    within the point tolerance of a board lie the foot of the panel behind it, the bottom rim
+    of the objects on it and the top of its side faces; their neighbourhoods are not level
+    (:func:`_voxels_to_vet`). Returns points unlabelled."""
+    if len(vetted) == 0:
+        return 0
+    # Neighbours come from the vetted voxels, those beside them in their layer (a wall's
+    # foot, an object's rim) and those just above and below.
+    beside = [(dx, dy, 0) for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy]
+    j = index.neighbours_many(vetted, [*beside, (0, 0, 1), (0, 0, -1)], grid.keys)
+    vox = np.unique(np.concatenate([vetted, j[j >= 0]]))
+    n_pts = grid.counts[vox]
+    first = np.cumsum(n_pts) - n_pts
+    pos = np.repeat(grid.starts[vox] - first, n_pts) + np.arange(n_pts.sum())
+    # Support points in voxel order (queries in that order find their neighbours in cache),
+    # relative to one corner: precise far from the origin, no (N, 3) row gathers.
+    rel = np.repeat(grid.keys[vox] - grid.keys[vox[0]], n_pts, axis=0) * grid.size
+    support = np.stack([grid.local[a][pos] for a in range(3)], axis=1) + rel
+    in_vetted = np.zeros(len(grid.counts), dtype=bool)
+    in_vetted[vetted] = True
+    query = np.flatnonzero(np.repeat(in_vetted[vox], n_pts) & (sorted_labels[pos] >= 0))
+    k = min(params.clutter_normal_k, len(support))
+    if len(query) == 0 or k < 3:
+        return 0
+    # An unbalanced tree builds in half the time and queries as fast on scan-like data.
+    tree = cKDTree(support, balanced_tree=False, compact_nodes=False)
+    normal, _ = normals_at(tree, support, support[query], k)
+    tilted = np.abs(normal[:, 2]) < np.cos(np.radians(params.normal_filter_max_tilt_deg))
+    sorted_labels[pos[query[tilted]]] = -1
+    return int(tilted.sum())

@@ -1,0 +1,202 @@
+"""Per-surface properties from its points (centroid, plane, height, area, cells)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.surfaces.footprint import _cells_key, footprint_widths
+from supportnode.geometry.surfaces.result import Surface
+from supportnode.geometry.voxels import OUTER_INDEX, VoxelGrid
+from supportnode.params import SurfaceParams
+
+
+def _summarise(
+    grid: VoxelGrid,
+    sorted_labels: np.ndarray,
+    surface_of_voxel: np.ndarray,
+    params: SurfaceParams,
+    widths: dict[bytes, float] | None = None,
+) -> tuple[list[Surface], np.ndarray]:
+    """Per-surface properties from its points; surfaces sorted largest first, ids 0..
+
+    sorted_labels: (N,) component of each point in the grid's voxel order, -1 for none;
+    returns the surfaces and each component's surface id: ``lut[sorted_labels]`` (int32,
+    its last entry -1 for the points on none). widths: footprint widths already
+    measured, by ``_cells_key`` of the footprint (see :func:`_filter_components`)."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.runs import range_extremes, run_moments
+
+    at = np.flatnonzero(sorted_labels >= 0)
+    if len(at) == 0:
+        return [], np.full(1, -1, dtype=np.int32)
+    lab = sorted_labels[at]
+    present = np.bincount(lab)
+    comps = np.flatnonzero(present)
+    s_count = len(comps)
+    remap = np.full(len(present) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
+    remap[comps] = np.arange(s_count)
+    # Runs of one (voxel, surface) are reduced first; surfaces are then sums over their runs.
+    # Most surface voxels hold points of one surface only: their run is the whole voxel, whose
+    # moments the grid already has. Only mixed voxels are reduced point by point.
+    # Only the labelled points are read (a few of all): a voxel is pure when all its points
+    # are labelled, with one surface.
+    at_vox = np.searchsorted(grid.starts, at, side="right") - 1
+    first = np.flatnonzero(np.r_[True, at_vox[1:] != at_vox[:-1]])
+    vv = at_vox[first]
+    n_on = np.diff(np.append(first, len(at)))
+    pure = (n_on == grid.counts[vv]) & (
+        np.minimum.reduceat(lab, first) == np.maximum.reduceat(lab, first)
+    )
+    pure_vox = vv[pure]
+    mixed = np.repeat(~pure, n_on)
+    g = remap[lab[mixed]]
+    vox = at_vox[mixed]
+    cut = np.empty(len(g), dtype=bool)
+    cut[:1] = True
+    cut[1:] = (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])
+    run = np.flatnonzero(cut)
+    # The mixed runs' moments and extremes read in place (compiled: no gathered columns).
+    m_sum, m_outer, m_min, m_max = run_moments(grid.local, at[mixed], run)
+    run_g = np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], g[run]])
+    run_vox = np.concatenate([pure_vox, vox[run]])
+    run_n = np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))])
+    corner = grid.keys[run_vox] * grid.size
+    r_sum = np.concatenate([grid.sums[pure_vox], m_sum])
+    r_outer = np.concatenate([grid.outer[pure_vox], m_outer])
+    # Extremes of the pure voxels from their own points (all of the voxel's).
+    v_min, v_max = range_extremes(grid.local, grid.starts[pure_vox], grid.counts[pure_vox])
+    r_min = np.concatenate([v_min, m_min]) + corner
+    r_max = np.concatenate([v_max, m_max]) + corner
+
+    counts = np.bincount(run_g, weights=run_n, minlength=s_count)
+    abs_sum = r_sum + corner * run_n[:, None]
+    centroid = (
+        np.stack(
+            [np.bincount(run_g, weights=abs_sum[:, a], minlength=s_count) for a in range(3)], axis=1
+        )
+        / counts[:, None]
+    )
+    # Second moments about the surface centroid from each run's corner-relative moments.
+    shift = corner - centroid[run_g]
+    cov = np.empty((s_count, 3, 3))
+    for col, (a, b) in enumerate(OUTER_INDEX):
+        m = (
+            r_outer[:, col]
+            + shift[:, a] * r_sum[:, b]
+            + shift[:, b] * r_sum[:, a]
+            + run_n * shift[:, a] * shift[:, b]
+        )
+        cov[:, a, b] = cov[:, b, a] = np.bincount(run_g, weights=m, minlength=s_count) / counts
+    evals, normal = sym3_eigen(cov)
+    normal = np.where(normal[:, 2:3] < 0, -normal, normal)
+    flatness = np.sqrt(np.maximum(evals[:, 0], 0.0))
+    bmin = np.full((s_count, 3), np.inf)
+    bmax = np.full((s_count, 3), -np.inf)
+    np.minimum.at(bmin, run_g, r_min)
+    np.maximum.at(bmax, run_g, r_max)
+    # Height: the median of z, taken over runs weighted by their points (a run is one voxel's
+    # share of a level surface, so its mean z stands for its points to within the roughness).
+    height = _weighted_median(abs_sum[:, 2] / run_n, run_n, run_g, s_count)
+    counts = counts.astype(np.int64)
+    vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
+    run_xy_min, run_xy_max = r_min[:, :2], r_max[:, :2]
+    run_cells = grid.keys[run_vox, :2]
+    vx, vy = float(params.voxel_size[0]), float(params.voxel_size[1])
+    area, cells_of = _footprint_areas(
+        run_cells, run_g, run_xy_min, run_xy_max, run_n, s_count, (vx, vy)
+    )
+
+    rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
+    new_id = np.empty(s_count, dtype=np.int64)
+    new_id[rank] = np.arange(s_count)
+    width = np.array(
+        [-1.0 if widths is None else widths.get(_cells_key(c), -1.0) for c in cells_of]
+    )
+    todo = np.flatnonzero(width < 0)
+    if len(todo):
+        width[todo] = footprint_widths([cells_of[i] for i in todo], (vx, vy))
+    surfaces = []
+    for sid, c in enumerate(rank):  # one entry per surface
+        cells = cells_of[c]
+        surfaces.append(
+            Surface(
+                id=sid,
+                height=float(height[c]),
+                area=float(area[c]),
+                centroid=centroid[c],
+                normal=normal[c],
+                flatness=float(flatness[c]),
+                bbox_min=bmin[c],
+                bbox_max=bmax[c],
+                outline=[],  # traced once the surface is kept (detect_surfaces)
+                point_count=int(counts[c]),
+                voxel_count=int(vcount[c]),
+                cells=cells,
+                cell_size=(vx, vy),
+                width=float(width[c]),
+            )
+        )
+    new_id = np.append(new_id, -1).astype(np.int32)
+    return surfaces, new_id[remap]
+
+
+def _weighted_median(
+    values: np.ndarray, weights: np.ndarray, groups: np.ndarray, n: int
+) -> np.ndarray:
+    """Weighted median of ``values`` within each group 0..n-1."""
+    order = np.lexsort((values, groups))
+    v, w, g = values[order], weights[order].astype(np.float64), groups[order]
+    cum = np.cumsum(w)
+    start = np.searchsorted(g, np.arange(n))
+    end = np.searchsorted(g, np.arange(n), side="right")
+    before = np.where(start > 0, cum[np.maximum(start - 1, 0)], 0.0)
+    half = before + 0.5 * (cum[end - 1] - before)
+    pos = np.searchsorted(cum, half)
+    return v[np.clip(pos, start, end - 1)]
+
+
+def _footprint_areas(
+    cells: np.ndarray,
+    group: np.ndarray,
+    xy_min: np.ndarray,
+    xy_max: np.ndarray,
+    n: np.ndarray,
+    n_groups: int,
+    cell_size: tuple[float, float],
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Area of each group's footprint and its (C, 2) cells, from per-voxel runs of points.
+
+    Interior cells count whole; a border cell counts the part its points span, so a table
+    edge that cuts a cell is not rounded up to the whole cell."""
+    vx, vy = cell_size
+    lo = cells.min(axis=0) - 1
+    ck = cells - lo
+    span = int(ck[:, 1].max()) + 2
+    ncell = (int(ck[:, 0].max()) + 2) * span
+    pair = group.astype(np.int64) * ncell + ck[:, 0] * span + ck[:, 1]
+    order = np.argsort(pair, kind="stable")  # runs, not points: small
+    ps = pair[order]
+    first = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]])
+    upair = ps[first]
+    n_in = np.add.reduceat(n[order], first)
+    ext = np.maximum.reduceat(xy_max[order], first, axis=0) - np.minimum.reduceat(
+        xy_min[order], first, axis=0
+    )
+    # n uniform samples span (n-1)/(n+1) of an interval on average: undo that shrinkage.
+    stretch = (n_in + 1) / np.maximum(n_in - 1, 1)
+    frac = np.clip(ext[:, 0] * stretch / vx, 0, 1) * np.clip(ext[:, 1] * stretch / vy, 0, 1)
+    # Too few points, or one scan line crossing the cell, say nothing about coverage.
+    frac[(n_in < 3) | (frac < 0.05)] = 0.5
+    interior = np.ones(len(upair), dtype=bool)
+    for delta in (span, -span, 1, -1):  # the four edge neighbours of each cell
+        q = upair + delta
+        pos = np.minimum(np.searchsorted(upair, q), len(upair) - 1)
+        interior &= upair[pos] == q
+    frac[interior] = 1.0
+    ug = upair // ncell
+    area = np.bincount(ug, weights=frac, minlength=n_groups) * vx * vy
+    local = upair % ncell
+    out_cells = np.stack([local // span, local % span], axis=1) + lo
+    bounds = np.searchsorted(ug, np.arange(n_groups + 1))
+    return area, [out_cells[bounds[i] : bounds[i + 1]] for i in range(n_groups)]

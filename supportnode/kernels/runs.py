@@ -1,0 +1,120 @@
+"""Moments and extremes of runs of points, read in place from a voxel grid's offset columns.
+
+Surface summaries reduce the labelled points of each (voxel, surface) run: numpy gathered the
+points' three columns and six products into fresh arrays first, then ran a reduceat on each
+(the costliest step of a summary on millions of points). Here each run is one loop.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from supportnode.kernels.runtime import warmer
+
+
+@njit(cache=True)
+def _run_moments(
+    lx: np.ndarray, ly: np.ndarray, lz: np.ndarray, idx: np.ndarray, run: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    r_count = run.size
+    sums = np.empty((r_count, 3))
+    outer = np.empty((r_count, 6))
+    lo = np.empty((r_count, 3))
+    hi = np.empty((r_count, 3))
+    for r in range(r_count):
+        stop = run[r + 1] if r + 1 < r_count else idx.size
+        sx = sy = sz = xx = yy = zz = xy = xz = yz = 0.0
+        x0, y0, z0 = np.inf, np.inf, np.inf
+        x1, y1, z1 = -np.inf, -np.inf, -np.inf
+        for k in range(run[r], stop):
+            j = idx[k]
+            x, y, z = lx[j], ly[j], lz[j]
+            sx += x
+            sy += y
+            sz += z
+            xx += x * x
+            yy += y * y
+            zz += z * z
+            xy += x * y
+            xz += x * z
+            yz += y * z
+            x0, y0, z0 = min(x0, x), min(y0, y), min(z0, z)
+            x1, y1, z1 = max(x1, x), max(y1, y), max(z1, z)
+        sums[r, 0], sums[r, 1], sums[r, 2] = sx, sy, sz
+        outer[r, 0], outer[r, 1], outer[r, 2] = xx, yy, zz
+        outer[r, 3], outer[r, 4], outer[r, 5] = xy, xz, yz
+        lo[r, 0], lo[r, 1], lo[r, 2] = x0, y0, z0
+        hi[r, 0], hi[r, 1], hi[r, 2] = x1, y1, z1
+    return sums, outer, lo, hi
+
+
+@njit(cache=True)
+def _range_extremes(
+    lx: np.ndarray, ly: np.ndarray, lz: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.empty((starts.size, 3))
+    hi = np.empty((starts.size, 3))
+    for r in range(starts.size):
+        x0, y0, z0 = np.inf, np.inf, np.inf
+        x1, y1, z1 = -np.inf, -np.inf, -np.inf
+        for j in range(starts[r], starts[r] + counts[r]):
+            x, y, z = lx[j], ly[j], lz[j]
+            x0, y0, z0 = min(x0, x), min(y0, y), min(z0, z)
+            x1, y1, z1 = max(x1, x), max(y1, y), max(z1, z)
+        lo[r, 0], lo[r, 1], lo[r, 2] = x0, y0, z0
+        hi[r, 0], hi[r, 1], hi[r, 2] = x1, y1, z1
+    return lo, hi
+
+
+def _columns(local: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
+    if not (lx.ndim == ly.ndim == lz.ndim == 1 and len(lx) == len(ly) == len(lz)):
+        raise ValueError("local must be three (N,) columns of one length")
+    return lx, ly, lz
+
+
+def run_moments(
+    local: list[np.ndarray], idx: np.ndarray, run: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sums, products, least and greatest coordinates of R runs of points.
+
+    local: three (N,) float64 columns x, y, z (metres); idx: (K,) int positions into them;
+    run: (R,) int, strictly increasing, ``run[0] == 0`` when R > 0: run r holds
+    ``idx[run[r] : run[r + 1]]`` (the last to the end). Returns sums (R, 3), products (R, 6)
+    (xx, yy, zz, xy, xz, yz), minima (R, 3), maxima (R, 3), float64. Raises ValueError on
+    shapes, positions outside the points or runs that are not increasing.
+    """
+    lx, ly, lz = _columns(local)
+    i = np.ascontiguousarray(idx, dtype=np.int64).ravel()
+    r = np.ascontiguousarray(run, dtype=np.int64).ravel()
+    if len(i) and (i.min() < 0 or i.max() >= len(lx)):
+        raise ValueError(f"positions must lie in [0, {len(lx)})")
+    if len(r) and (r[0] != 0 or (np.diff(r) <= 0).any() or r[-1] >= max(len(i), 1)):
+        raise ValueError("runs must start at 0 and increase strictly within the positions")
+    if len(i) and not len(r):
+        raise ValueError("positions given without runs")
+    return _run_moments(lx, ly, lz, i, r)
+
+
+def range_extremes(
+    local: list[np.ndarray], starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Least and greatest x, y, z of R contiguous ranges ``starts[r] : starts[r] + counts[r]``
+    of the (N,) columns ``local``: (R, 3) float64 each (inf / -inf for an empty range).
+    Raises ValueError on shapes or ranges outside the points."""
+    lx, ly, lz = _columns(local)
+    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
+    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
+    if len(s) != len(c):
+        raise ValueError("starts and counts differ in length")
+    if len(s) and ((s < 0).any() or (c < 0).any() or (s + c > len(lx)).any()):
+        raise ValueError("a range lies outside the points")
+    return _range_extremes(lx, ly, lz, s, c)
+
+
+@warmer
+def _warm() -> None:
+    cols = [np.arange(3.0), np.zeros(3), np.ones(3)]
+    run_moments(cols, np.array([0, 2]), np.array([0, 1]))
+    range_extremes(cols, np.array([0]), np.array([3]))

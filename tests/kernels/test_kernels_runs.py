@@ -1,0 +1,76 @@
+"""Run moments and range extremes against numpy reductions over gathered points, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from supportnode.kernels import runtime
+from supportnode.kernels.runs import _warm, range_extremes, run_moments
+
+PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+@settings(max_examples=80, deadline=None)
+@given(n=st.integers(1, 300), k=st.integers(0, 200), seed=st.integers(0, 10_000))
+def test_run_moments_match_numpy_reductions(n, k, seed):
+    rng = np.random.default_rng(seed)
+    local = [rng.uniform(0, 0.1, n) for _ in range(3)]
+    idx = np.sort(rng.integers(0, n, k))
+    run = np.flatnonzero(np.r_[True, rng.random(max(k - 1, 0)) < 0.2]) if k else np.zeros(0, int)
+    sums, outer, lo, hi = run_moments(local, idx, run)
+    assert sums.shape == (len(run), 3) and outer.shape == (len(run), 6)
+    bounds = np.append(run, k)
+    for r in range(len(run)):
+        pts = np.stack([c[idx[bounds[r] : bounds[r + 1]]] for c in local], axis=1)
+        np.testing.assert_allclose(sums[r], pts.sum(axis=0), rtol=1e-12, atol=1e-15)
+        want = [np.sum(pts[:, a] * pts[:, b]) for a, b in PAIRS]
+        np.testing.assert_allclose(outer[r], want, rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(lo[r], pts.min(axis=0))  # exact: no rounding
+        np.testing.assert_array_equal(hi[r], pts.max(axis=0))
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(0, 200), seed=st.integers(0, 10_000))
+def test_range_extremes_match_numpy(n, seed):
+    rng = np.random.default_rng(seed)
+    local = [rng.normal(0, 1, n) for _ in range(3)]
+    cuts = np.sort(rng.integers(0, n + 1, 6))
+    starts, counts = cuts[0::2], cuts[1::2] - cuts[0::2]
+    lo, hi = range_extremes(local, starts, counts)
+    for r, (s, c) in enumerate(zip(starts, counts, strict=True)):
+        if c == 0:
+            assert (lo[r] == np.inf).all() and (hi[r] == -np.inf).all()
+            continue
+        pts = np.stack([col[s : s + c] for col in local], axis=1)
+        np.testing.assert_array_equal(lo[r], pts.min(axis=0))
+        np.testing.assert_array_equal(hi[r], pts.max(axis=0))
+
+
+def test_empty_input():
+    cols = [np.zeros(0)] * 3
+    out = run_moments(cols, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    assert [a.shape for a in out] == [(0, 3), (0, 6), (0, 3), (0, 3)]
+    lo, hi = range_extremes(cols, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    assert lo.shape == hi.shape == (0, 3)
+
+
+def test_bad_input_is_rejected_before_the_loop():
+    cols = [np.zeros(4)] * 3
+    with pytest.raises(ValueError, match="lie in"):
+        run_moments(cols, np.array([0, 4]), np.array([0]))
+    with pytest.raises(ValueError, match="increase"):
+        run_moments(cols, np.array([0, 1]), np.array([0, 0]))
+    with pytest.raises(ValueError, match="without runs"):
+        run_moments(cols, np.array([0, 1]), np.zeros(0, np.int64))
+    with pytest.raises(ValueError, match="one length"):
+        run_moments([np.zeros(4), np.zeros(3), np.zeros(4)], np.array([0]), np.array([0]))
+    with pytest.raises(ValueError, match="outside"):
+        range_extremes(cols, np.array([2]), np.array([3]))
+
+
+def test_warm_up_is_registered():
+    assert _warm in runtime._WARMERS
+    _warm()
