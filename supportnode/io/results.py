@@ -27,13 +27,13 @@ def per_input_row(labels: np.ndarray, cloud: Cloud) -> np.ndarray:
 
 
 def write_detection(
-    out_dir: str | os.PathLike,
+    out_dir: str | os.PathLike[str],
     name: str,
     cloud: Cloud,
     points: np.ndarray,
     detection: Detection,
-    params_dict: dict,
-    extra: dict | None = None,
+    params_dict: dict[str, Any],
+    extra: dict[str, Any] | None = None,
 ) -> list[Path]:
     """Write every output of one detection; returns the paths written.
 
