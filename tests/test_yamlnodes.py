@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from supportnode.errors import ConfigError, SceneError
 from supportnode.yamlnodes import LineMap, LineSeq, compose, line_tree, read_text
@@ -61,3 +64,26 @@ def test_read_text_names_the_file(tmp_path):
     good = tmp_path / "ok.yaml"
     good.write_text("a: é\n", encoding="utf-8")
     assert read_text(good, ConfigError) == "a: é\n"
+
+
+_scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**12), 10**12)
+    | st.floats(allow_nan=False, width=64)
+    | st.text(max_size=12)
+)
+_keys = st.text(max_size=8) | st.integers(-100, 100)
+_docs = st.recursive(
+    _scalars,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(_keys, inner, max_size=4),
+    max_leaves=20,
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(_docs, st.booleans())
+def test_same_values_as_safe_load(doc, flow):
+    # The reference: PyYAML's own safe_load of the same text, block and flow style.
+    text = yaml.safe_dump(doc, default_flow_style=flow, allow_unicode=True)
+    assert tree(text) == yaml.safe_load(text)

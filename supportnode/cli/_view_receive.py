@@ -40,7 +40,7 @@ def receive(args: argparse.Namespace, stop: threading.Event, handle: Any) -> Non
     import queue
     import time
 
-    inbox: queue.Queue = queue.Queue(maxsize=_QUEUE)
+    inbox: queue.Queue[tuple[str, Any, float]] = queue.Queue(maxsize=_QUEUE)
     wanted = [(args.endpoint, args.topics, _KEEP_RESULTS)]
     if not args.no_scan:
         wanted.append((args.scan_endpoint, [args.scan_topic], _KEEP_SCANS))

@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _convert(args: argparse.Namespace, writer_args: dict) -> int:
+def _convert(args: argparse.Namespace, writer_args: dict[str, Any]) -> int:
     """--from: write a source's messages at their source times."""
     import sys
 

@@ -104,8 +104,9 @@ def to_uint8_colour(arr: np.ndarray) -> np.ndarray:
         finite = arr[np.isfinite(arr)]
         if finite.size and finite.max() <= 1.0:
             arr = arr * 255.0
-        return np.clip(np.nan_to_num(np.round(arr)), 0, 255).astype(np.uint8)
-    return np.clip(arr, 0, 255).astype(np.uint8)
+        arr = np.nan_to_num(np.round(arr))
+    out: np.ndarray = np.clip(arr, 0, 255).astype(np.uint8)
+    return out
 
 
 def combine_rgb(fields: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -63,4 +63,5 @@ def _origin(raw: np.ndarray, scale: np.ndarray, offset: np.ndarray) -> np.ndarra
     hi = raw.max(axis=0) * scale + offset
     inside = np.all((offset >= lo - _OFFSET_SLACK_M) & (offset <= hi + _OFFSET_SLACK_M))
     base = offset if inside and np.any(offset != 0) else lo
-    return np.floor(base)
+    out: np.ndarray = np.floor(base)
+    return out

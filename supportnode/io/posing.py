@@ -62,7 +62,8 @@ class ScanPoser:
             m = self.tf.lookup(cloud.frame_id, sample.frame_id, cloud.stamp, self.tolerance)
         except TfError:
             return None
-        return m[:3, :3] @ (-a / np.linalg.norm(a))
+        up: np.ndarray = m[:3, :3] @ (-a / np.linalg.norm(a))
+        return up
 
     def _nearest_imu(self, t: float) -> ImuSample | None:
         i = bisect.bisect_left(self._imu_times, t)

@@ -110,7 +110,7 @@ class RecordingWriter(Closing):
         except OSError as err:
             raise RecordingError(f"{self.path}: cannot write ({err.strerror or err})") from err
         kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}
-        self._writer = Writer(
+        self._writer: Any = Writer(
             self._file,
             chunk_size=chunk_size,
             compression=kind.get(compression, CompressionType.NONE),

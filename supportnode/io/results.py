@@ -26,14 +26,29 @@ def per_input_row(labels: np.ndarray, cloud: Cloud) -> np.ndarray:
     return out
 
 
+def _write_objects(obj_dir: Path, points: np.ndarray, labels: np.ndarray, count: int) -> list[Path]:
+    """One PLY per object id 0..count-1 (``000.ply`` ...: the points labelled with it)."""
+    obj_dir.mkdir(exist_ok=True)
+    for stale in obj_dir.glob("*.ply"):  # a rerun with fewer objects leaves none behind
+        stale.unlink()
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(count + 1))
+    written = []
+    for cid in range(count):  # one file per object
+        path = obj_dir / f"{cid:03d}.ply"
+        write_ply(path, points[order[bounds[cid] : bounds[cid + 1]]])
+        written.append(path)
+    return written
+
+
 def write_detection(
-    out_dir: str | os.PathLike,
+    out_dir: str | os.PathLike[str],
     name: str,
     cloud: Cloud,
     points: np.ndarray,
     detection: Detection,
-    params_dict: dict,
-    extra: dict | None = None,
+    params_dict: dict[str, Any],
+    extra: dict[str, Any] | None = None,
 ) -> list[Path]:
     """Write every output of one detection; returns the paths written.
 
@@ -56,18 +71,9 @@ def write_detection(
     arrays = {"surface": per_input_row(detection.surfaces.labels, cloud), "finite": finite}
     if detection.objects is not None:
         arrays["object"] = per_input_row(detection.objects.labels, cloud)
+        objects = detection.objects
         obj_dir = out / f"{name}_objects"
-        obj_dir.mkdir(exist_ok=True)
-        for stale in obj_dir.glob("*.ply"):  # a rerun with fewer objects leaves none behind
-            stale.unlink()
-        labels = detection.objects.labels
-        order = np.argsort(labels, kind="stable")
-        bounds = np.searchsorted(labels[order], np.arange(len(detection.objects.clusters) + 1))
-        for cid in range(len(detection.objects.clusters)):  # one file per object
-            idx = order[bounds[cid] : bounds[cid + 1]]
-            path = obj_dir / f"{cid:03d}.ply"
-            write_ply(path, points[idx])
-            written.append(path)
+        written += _write_objects(obj_dir, points, objects.labels, len(objects.clusters))
     labels_path = out / "labels.npz"
     # Any: numpy's stub reads a ** mapping as possibly holding its allow_pickle flag.
     np.savez_compressed(labels_path, **cast("dict[str, Any]", arrays))

@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 from collections.abc import Collection, Iterator
 from pathlib import Path
+from typing import Any
 
 from supportnode.errors import ProtocolError, SupportNodeError
 from supportnode.io.folder_source import FolderSource
@@ -133,7 +134,7 @@ class McapSource(Source):
                 continue
             yield SourceMessage(raw.log_time * 1e-9, stamp, ch.topic, type_name, frames)
 
-    def _convert(self, data: bytes, encoding: str, topic: str) -> tuple[list, float]:
+    def _convert(self, data: bytes, encoding: str, topic: str) -> tuple[list[Any], float]:
         from supportnode.io.rosbag import deserialize_pointcloud2, pointcloud2_to_cloud
 
         seq = self._seq.get(topic, 0)

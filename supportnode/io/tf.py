@@ -116,9 +116,10 @@ class TfBuffer:
                 f"no transform from {source!r} to {target!r} (their trees' roots: "
                 f"{up_s[-1]!r}, {up_t[-1]!r})",
             )
-        return np.linalg.inv(self._to(up_t, common, t, tolerance)) @ self._to(
+        m: np.ndarray = np.linalg.inv(self._to(up_t, common, t, tolerance)) @ self._to(
             up_s, common, t, tolerance
         )
+        return m
 
     def _to(self, chain: list[str], ancestor: str, t: float, tolerance: float) -> np.ndarray:
         m = np.eye(4)

@@ -15,10 +15,14 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from supportnode.errors import SupportNodeError
 from supportnode.render.draw import COLOR_MODES, VIEWS, draw_frame, project
 from supportnode.render.source import Frame, load_result, load_result_dir
+
+if TYPE_CHECKING:  # matplotlib is an optional extra: never imported at module level
+    from matplotlib.figure import Figure
 
 __all__ = [
     "COLOR_MODES",
@@ -59,7 +63,7 @@ def render_frame(
     return out
 
 
-def write_png(fig, out: Path, *, palette: bool = True) -> None:
+def write_png(fig: Figure, out: Path, *, palette: bool = True) -> None:
     """Write a figure at its own size and dpi (no bbox_inches="tight": that would change the
     pixel size the caller asked for).
 
@@ -75,7 +79,7 @@ def write_png(fig, out: Path, *, palette: bool = True) -> None:
     from PIL import Image
 
     fig.canvas.draw()
-    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
+    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]  # type: ignore[attr-defined]  # Agg
     # method 2 = fast octree, dither 0 = none; plain ints so Pillow < 9.1 (no enums) works too
     img = Image.fromarray(np.ascontiguousarray(rgb)).quantize(256, method=2, dither=0)  # type: ignore[arg-type]
     img.save(out, format="png", dpi=(fig.dpi, fig.dpi))

@@ -10,7 +10,7 @@ points, outlines, boxes and discs, equal scale in x and y so the scale bar holds
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -192,7 +192,9 @@ def _texts(
         )  # fmt: skip
 
 
-def _place_legend(fig: Figure, handles: list, left: float, top: float, fs: float, w_px: int):
+def _place_legend(
+    fig: Figure, handles: list[Any], left: float, top: float, fs: float, w_px: int
+) -> Any:
     """The legend in as many columns as fit the picture's width (measured, not guessed), its
     top-left corner `left`, `top` pixels from the figure's top-left."""
     h_px = fig.get_size_inches()[1] * fig.dpi
@@ -216,7 +218,7 @@ def _place_legend(fig: Figure, handles: list, left: float, top: float, fs: float
     raise AssertionError("unreachable")
 
 
-def _scale_bar(ax: Axes, xlim: tuple, ylim: tuple, fs: float) -> None:
+def _scale_bar(ax: Axes, xlim: tuple[float, float], ylim: tuple[float, float], fs: float) -> None:
     """A 1-2-5 metre bar; picture-plane x is true length in every view (orthographic)."""
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 

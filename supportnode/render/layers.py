@@ -4,7 +4,7 @@ labels and legend entries."""
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,12 +54,14 @@ class Labels:
     (kitchen-sized results have hundreds of objects; overlapping ids are unreadable anyway).
     Boxes are estimated in display pixels from the text length, which is close enough here."""
 
-    def __init__(self, ax: Axes, fs: float, dpi: float, halo: list) -> None:
+    def __init__(self, ax: Axes, fs: float, dpi: float, halo: list[Any]) -> None:
         self.ax, self.fs, self.dpi, self.halo = ax, fs, dpi, halo
         self.boxes: list[tuple[float, float, float, float]] = []
         self.hidden = 0
 
-    def _box(self, xy_px: np.ndarray, text: str, size: float, dx: float, dy: float, va: str):
+    def _box(
+        self, xy_px: np.ndarray, text: str, size: float, dx: float, dy: float, va: str
+    ) -> tuple[float, float, float, float]:
         h = size * self.dpi / 72.0 * 1.15
         w = size * self.dpi / 72.0 * 0.62 * len(text)
         x0 = xy_px[0] + dx
@@ -80,7 +82,7 @@ class Labels:
         text: str,
         *,
         size: float,
-        color,
+        color: Any,
         va: str = "top",
         bold: bool = False,
         force: bool = False,
@@ -162,7 +164,9 @@ def draw_points(
     return len(idx)
 
 
-def draw_surfaces(ax: Axes, result: dict, basis: np.ndarray, labels: Labels, fs, lw) -> None:
+def draw_surfaces(
+    ax: Axes, result: dict[str, Any], basis: np.ndarray, labels: Labels, fs: float, lw: float
+) -> None:
     """Outline rings at each surface's height (outer solid, holes dashed) and an id + height
     label inside the outer ring's top-left corner, else its bottom-left, else the centroid."""
     from matplotlib.collections import LineCollection
@@ -192,7 +196,14 @@ def draw_surfaces(ax: Axes, result: dict, basis: np.ndarray, labels: Labels, fs,
 
 
 def draw_objects(
-    ax: Axes, result: dict, basis: np.ndarray, view: str, color: str, labels: Labels, fs, lw
+    ax: Axes,
+    result: dict[str, Any],
+    basis: np.ndarray,
+    view: str,
+    color: str,
+    labels: Labels,
+    fs: float,
+    lw: float,
 ) -> None:
     """Oriented boxes: the top rectangle in the top view (the rest projects onto it), all 12
     edges otherwise; objects on no surface dotted grey. Ids by a top corner, largest first."""
@@ -200,7 +211,7 @@ def draw_objects(
 
     palette = _palette(20, "tab20")
     thin = 1.0 if view == "top" else 0.7  # 12 edges per box crowd the other views
-    groups: dict[bool, tuple[list, list]] = {True: ([], []), False: ([], [])}
+    groups: dict[bool, tuple[list[Any], list[Any]]] = {True: ([], []), False: ([], [])}
     # supported objects get their labels first: they are what the picture is about
     ordered = sorted(result["objects"], key=lambda o: (o.get("surface_id") is None, int(o["id"])))
     for o in ordered:
@@ -231,7 +242,7 @@ def draw_objects(
             )
 
 
-def draw_discs(ax: Axes, result: dict, basis: np.ndarray, lw: float) -> None:
+def draw_discs(ax: Axes, result: dict[str, Any], basis: np.ndarray, lw: float) -> None:
     """The largest free disc of each surface: a dashed circle at the surface's height (an
     ellipse in the oblique view, a segment in the side view)."""
     from matplotlib.collections import LineCollection
@@ -252,7 +263,7 @@ def draw_discs(ax: Axes, result: dict, basis: np.ndarray, lw: float) -> None:
         )
 
 
-def legend_handles(frame: Frame, color: str, fs: float) -> list:
+def legend_handles(frame: Frame, color: str, fs: float) -> list[Any]:
     """Legend entries; counts come from the full frame and result, not the drawn subset."""
     from matplotlib.lines import Line2D
 
@@ -261,7 +272,7 @@ def legend_handles(frame: Frame, color: str, fs: float) -> list:
     n_on = sum(o.get("surface_id") is not None for o in objects)
     lw = max(1.0, fs / 6.0)
 
-    def dot(rgb: tuple, label: str) -> Line2D:
+    def dot(rgb: tuple[float, float, float], label: str) -> Line2D:
         return Line2D([], [], marker="s", ls="", color=rgb, markersize=fs * 0.9, label=label)
 
     if color == "class":

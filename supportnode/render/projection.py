@@ -7,6 +7,7 @@ only in azimuth and elevation), so ``ax.transData`` maps projected metres to pix
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -37,10 +38,11 @@ def view_basis(view: str) -> np.ndarray:
 
 def project(points: np.ndarray, view: str) -> np.ndarray:
     """(N, 3) world metres -> (N, 2) picture-plane metres in `view` (what ax.transData takes)."""
-    return np.asarray(points, dtype=np.float64).reshape(-1, 3) @ view_basis(view)[:2].T
+    out: np.ndarray = np.asarray(points, dtype=np.float64).reshape(-1, 3) @ view_basis(view)[:2].T
+    return out
 
 
-def obb_corners(o: dict) -> np.ndarray:
+def obb_corners(o: dict[str, Any]) -> np.ndarray:
     """(8, 3) corners of an object's yaw-only oriented box: bottom four CCW, then top four."""
     c = np.asarray(o["obb_center"], dtype=np.float64)
     half = np.asarray(o["obb_size"], dtype=np.float64) / 2.0
@@ -64,7 +66,9 @@ def nice_length(span: float) -> float:
     return max(m * base for m in (1.0, 2.0, 5.0) if m * base <= target)
 
 
-def fit_limits(lo: np.ndarray, hi: np.ndarray, box_w: float, box_h: float) -> tuple:
+def fit_limits(
+    lo: np.ndarray, hi: np.ndarray, box_w: float, box_h: float
+) -> tuple[tuple[float, float], tuple[float, float]]:
     """Limits around [lo, hi] with a margin, widened along one axis to the axes' pixel aspect so
     one metre is as long across as up (the axes box then never moves: predictable pixels)."""
     span = np.maximum(hi - lo, 1e-3)
@@ -97,7 +101,7 @@ def extent(frame: Frame, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def rings3(s: dict) -> list[np.ndarray]:
+def rings3(s: dict[str, Any]) -> list[np.ndarray]:
     """A surface's outline rings, closed, as (K+1, 3) polylines at its height (outer first)."""
     h = float(s["height"])
     out = []

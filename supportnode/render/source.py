@@ -8,6 +8,7 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,12 +29,12 @@ class Frame:
     points: np.ndarray
     surface: np.ndarray
     object: np.ndarray | None
-    result: dict
+    result: dict[str, Any]
     name: str = ""
     notes: list[str] = field(default_factory=list)  # caveats worth a line on the picture
 
 
-def load_result(path: str | os.PathLike[str]) -> dict:
+def load_result(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Parse and check ``result.json`` (or the folder holding it); one-line SupportNodeError."""
     p = Path(path)
     if p.is_dir():
@@ -63,7 +64,7 @@ def load_result(path: str | os.PathLike[str]) -> dict:
     return result
 
 
-def _check_result(result: dict) -> None:
+def _check_result(result: dict[str, Any]) -> None:
     """Touch every field the drawing uses so that a bad file fails here, in one line, and not
     halfway through a figure."""
     for s in result["surfaces"]:
@@ -137,7 +138,11 @@ def _find_plys(d: Path, name: str) -> tuple[Path | None, Path | None]:
 
 
 def _labels_for_plys(
-    labels: dict[str, np.ndarray] | None, n_det: int, n_rest: int, inp: dict, notes: list[str]
+    labels: dict[str, np.ndarray] | None,
+    n_det: int,
+    n_rest: int,
+    inp: dict[str, Any],
+    notes: list[str],
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Per-point labels in PLY order (detected rows, then the rest).
 
@@ -170,7 +175,7 @@ def _labels_for_plys(
 
 
 def _from_input(
-    d: Path, inp: dict, labels: dict[str, np.ndarray] | None, result: dict
+    d: Path, inp: dict[str, Any], labels: dict[str, np.ndarray] | None, result: dict[str, Any]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Points from the input cloud named in result.json, labels from labels.npz."""
     from supportnode.io.clouds import read_cloud

@@ -160,7 +160,9 @@ def _packed(
 # ------------------------------------------------------------------------------------ scans
 
 
-def _point_cloud(stamp: float, frame_id: str, columns: list) -> FoxPointCloud:
+def _point_cloud(
+    stamp: float, frame_id: str, columns: list[tuple[str, np.ndarray]]
+) -> FoxPointCloud:
     """A Foxglove PointCloud at the frame's origin from (name, (N,) array) columns."""
     fields, stride, data = _packed(columns)
     return FoxPointCloud(
@@ -259,7 +261,8 @@ def _label_anchor(s: SupportSurface) -> np.ndarray:
     if bool(np.isfinite(c).all()):
         return c
     if s.outline and len(s.outline[0]):
-        return np.asarray(s.outline[0], dtype=float).mean(axis=0)
+        mean: np.ndarray = np.asarray(s.outline[0], dtype=float).mean(axis=0)
+        return mean
     return np.zeros(2)
 
 

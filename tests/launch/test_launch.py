@@ -17,7 +17,7 @@ import pytest
 from supportnode.errors import ConfigError
 from supportnode.launch import Launcher, load_launch, resolve_command
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 # A child that announces itself, then waits; on SIGTERM it appends its name to stopped.txt
 # (so the test sees the stop order) unless told to ignore SIGTERM.
