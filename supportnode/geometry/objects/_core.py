@@ -33,6 +33,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
 from supportnode.geometry.memo import Memo
+from supportnode.geometry.objects.convexity import cluster_convex
 from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import ObjectParams
 
@@ -233,10 +234,13 @@ def cluster_objects(
     points: np.ndarray,
     surfaces: SurfaceResult,
     params: ObjectParams | None = None,
+    sensor_origin: np.ndarray | None = None,
 ) -> Components:
     """Connected components of the points on no surface (arguments and errors as for
     :func:`detect_objects`), each with the surface it stands on: touching objects not split
-    yet. Free space is computed from these (see `supportnode.geometry.freespace`)."""
+    yet. Free space is computed from these (see `supportnode.geometry.freespace`).
+    sensor_origin: (3,) sensor position in the points' frame when known (the convex method
+    turns its normals toward it and widens the table band with range)."""
     params = params or ObjectParams()
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -257,8 +261,13 @@ def cluster_objects(
     elif params.method == "voxel":
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         lab = _cluster_voxel(cp, params.voxel_size, stats, support)
+    elif params.method == "convex":
+        support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
+        lab = cluster_convex(cp, surfaces.surfaces, support, params, sensor_origin, stats)
     else:
-        raise InputError(f"unknown object method {params.method!r}; expected 'knn' or 'voxel'")
+        raise InputError(
+            f"unknown object method {params.method!r}; expected 'knn', 'voxel' or 'convex'"
+        )
     lab = _drop_small(lab, params.min_points)
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
     seg = _order(cp, lab, lookups[1], params)
