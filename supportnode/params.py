@@ -196,6 +196,13 @@ class ObjectParams:
         min=0.0,
         max=90.0,
     )
+    convex_crease_curvature: float = param(
+        20.0,
+        "convex: a patch hollow toward the sensor by more than this curvature straddles a "
+        "concave crease and links nothing (it joins a neighbouring segment)",
+        "1/m",
+        min=0.0,
+    )
     convex_band_sigma: float = param(
         1.5e-3,
         "convex: depth noise per squared metre of range (Kinect ~1.5e-3); points within 3 "

@@ -37,6 +37,7 @@ def convex_segments(
     smooth_deg: float = 25.0,
     convex_tol: float = 0.05,
     min_points: int = 30,
+    crease_curvature: float = 80.0,
 ) -> np.ndarray:
     """(M,) int64 segment of each point of ``points`` (M, 3) float, metres; -1 for none.
 
@@ -46,6 +47,7 @@ def convex_segments(
     differ by less than this stay linked even where they meet concavely. convex_tol: how far
     below zero the convexity measure ``(n_i - n_j) . d_ij / |d_ij|`` may fall for noise.
     Segments smaller than ``min_points`` join the neighbour they share the most links with.
+    crease_curvature: 1/m; a patch hollow by more than this toward the sensor is a crease.
     """
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) == 0:
@@ -62,9 +64,34 @@ def convex_segments(
         flip = ~flip  # away from the centroid
     normal[flip] *= -1.0
     keep = _keep_links(centroid, normal, src, dst, smooth_deg, convex_tol)
+    # A patch straddling a concave crease has a normal between its two faces and links
+    # "convexly" to both where the crease ends beside an occluded face: such patches link
+    # nothing, and join a neighbouring segment afterwards.
+    crease = _concavity(pts, patch, centroid, normal, count) > crease_curvature
+    keep &= ~(crease[src] | crease[dst])
     comp = label_edges(n_patch, src[keep], dst[keep])
-    comp = _absorb_small(comp, np.bincount(comp, weights=count).astype(np.int64), src, dst, min_points)
+    size = np.bincount(comp, weights=count).astype(np.int64)
+    small = size < min_points
+    small[comp[crease]] = True
+    comp = _absorb_small(comp, small, src, dst)
     return comp[patch]
+
+
+def _concavity(
+    pts: np.ndarray, patch: np.ndarray, centroid: np.ndarray, normal: np.ndarray, count: np.ndarray
+) -> np.ndarray:
+    """(P,) curvature of each patch toward its normal, 1/m (> 0: a hollow facing the sensor,
+    as at a concave crease; ~0 on a face): the least-squares k of h = k r^2 / 2 over its
+    points (h their height over the patch plane, r their distance from the centroid in it)."""
+    n = len(count)
+    off = pts - centroid[patch]
+    h = np.einsum("ij,ij->i", off, normal[patch])
+    r2 = np.einsum("ij,ij->i", off, off) - h * h
+    mr2 = np.bincount(patch, r2, n) / count
+    dr2 = r2 - mr2[patch]
+    cov = np.bincount(patch, h * dr2, n)
+    var = np.bincount(patch, dr2 * dr2, n)
+    return np.where((count >= 6) & (var > 0), 2.0 * cov / np.where(var > 0, var, 1.0), 0.0)
 
 
 def _cells(pts: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,12 +192,9 @@ def _keep_links(
     return smooth | (convexity > -convex_tol)
 
 
-def _absorb_small(
-    comp: np.ndarray, size: np.ndarray, src: np.ndarray, dst: np.ndarray, min_points: int
-) -> np.ndarray:
-    """Segments of fewer than min_points points join the big segment they share the most
-    links with (crease patches with mixed normals); those with no big neighbour stay apart."""
-    small = size < min_points
+def _absorb_small(comp: np.ndarray, small: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """The small segments (small: (S,) bool) join the other segment they share the most links
+    with (crease patches, slivers with mixed normals); those with no such neighbour stay."""
     if not small.any() or len(src) == 0:
         return comp
     a, b = comp[src], comp[dst]
@@ -178,7 +202,7 @@ def _absorb_small(
     pick = small[a] & ~small[b]
     if not pick.any():
         return comp
-    n = len(size)
+    n = len(small)
     pair, votes = np.unique(a[pick] * n + b[pick], return_counts=True)
     order = np.lexsort((-votes, pair // n))
     first = np.ones(len(order), bool)
@@ -218,6 +242,7 @@ def cluster_convex(
         fine=params.convex_cell,
         smooth_deg=params.convex_smooth_deg,
         min_points=params.min_points,
+        crease_curvature=params.convex_crease_curvature,
     )
     stats["voxels"] = int(lab.max() + 1) if len(lab) else 0
     return lab
