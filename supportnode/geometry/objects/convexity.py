@@ -16,6 +16,8 @@ import numpy as np
 from supportnode.geometry.linalg import sym3_eigen
 from supportnode.kernels.components import label_edges
 
+_MIN_PER_CELL = 3  # median points per occupied fine cell
+_MAX_CELL = 0.04  # metres: the grid stops growing here (gaps of a few cm cut)
 # The 13 offsets of half the 26-neighbourhood: each adjacent pair is found once.
 _HALF = np.array(
     [
@@ -37,7 +39,7 @@ def convex_segments(
     smooth_deg: float = 25.0,
     convex_tol: float = 0.05,
     min_points: int = 30,
-    crease_curvature: float = 80.0,
+    crease_curvature: float = 20.0,
 ) -> np.ndarray:
     """(M,) int64 segment of each point of ``points`` (M, 3) float, metres; -1 for none.
 
@@ -53,6 +55,12 @@ def convex_segments(
     if len(pts) == 0:
         return np.zeros(0, np.int64)
     fine_of, fine_keys, dims = _cells(pts, fine)
+    # Cells follow the point spacing: a sparse cloud (a sampled map, a far lidar return) has
+    # too few points per cell for its surfaces to touch, so the cell grows until a typical
+    # occupied cell holds a few points (a surface sampled at half the cell or finer).
+    while np.median(np.bincount(fine_of)) < _MIN_PER_CELL and fine < _MAX_CELL:
+        fine *= 1.5
+        fine_of, fine_keys, dims = _cells(pts, fine)
     patch_of_fine = _patch_ids(fine_keys, dims, ratio)
     patch = patch_of_fine[fine_of]
     n_patch = int(patch_of_fine.max()) + 1
@@ -192,7 +200,9 @@ def _keep_links(
     return smooth | (convexity > -convex_tol)
 
 
-def _absorb_small(comp: np.ndarray, small: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+def _absorb_small(
+    comp: np.ndarray, small: np.ndarray, src: np.ndarray, dst: np.ndarray
+) -> np.ndarray:
     """The small segments (small: (S,) bool) join the other segment they share the most links
     with (crease patches, slivers with mixed normals); those with no such neighbour stay."""
     if not small.any() or len(src) == 0:
