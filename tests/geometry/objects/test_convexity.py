@@ -132,3 +132,34 @@ def test_real_mosd_floor():
     assert not any(s.refused for s in scores)
     assert np.mean([s.ari for s in scores]) > 0.75
     assert min(s.table_p for s in scores) > 0.97
+
+
+def _cluster(cid, surface_id, by=-1):
+    from supportnode.geometry.objects import Cluster
+
+    z = 0.0 if by < 0 else 0.1
+    return Cluster(
+        id=cid, surface_id=surface_id, point_count=100, centroid=np.zeros(3),
+        bbox_min=np.array([0.0, 0.0, z]), bbox_max=np.array([0.2, 0.2, z + 0.1]),
+        obb_center=np.zeros(3), obb_size=np.ones(3), obb_yaw=0.0, height=0.1,
+        footprint=np.zeros((0, 2)), volume=0.001, supported_by=by,
+    )  # fmt: skip
+
+
+def test_supported_by_on_the_wire_and_in_result_json():
+    """The obstacles message carries supported_by in stable ids; a bad value is rejected."""
+    from supportnode.errors import ProtocolError
+    from supportnode.msgs import decode_any
+    from supportnode.msgs.results import ObstacleClusters
+
+    clusters = [_cluster(0, 3), _cluster(1, 3, by=0)]
+    assert [c.to_dict()["supported_by"] for c in clusters] == [-1, 0]
+    msg = ObstacleClusters.from_detection(clusters, 1.0, "map", ids=[7, 9])
+    frames = msg.encode("obstacles")
+    out = decode_any([bytes(f) for f in frames])
+    assert [c.supported_by for c in out.clusters] == [-1, 7]
+    plain = ObstacleClusters.from_detection([_cluster(0, 3)], 1.0, "map").encode("o")
+    assert decode_any([bytes(f) for f in plain]).clusters[0].supported_by == -1
+    msg.clusters[1].supported_by = 42  # no such id in the message
+    with pytest.raises(ProtocolError, match="supported_by"):
+        decode_any([bytes(f) for f in msg.encode("obstacles")])
