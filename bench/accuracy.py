@@ -1,6 +1,6 @@
 """Accuracy against the simulator's ground truth: surfaces, objects, gravity.
 
-Run: python bench/accuracy.py [--points 150000] [--tilts 8] [--docs]
+Run: python bench/accuracy.py [--points 150000] [--tilts 8] [--set objects.method=convex] [--docs]
 Every simulator figure in docs/accuracy.md comes from this script (seeds fixed; ``--docs``
 writes its tables there), the cluttered tabletop's rows included: sampled, and one Kinect view
 with its noise.
@@ -109,10 +109,11 @@ def main() -> None:
     parser.add_argument(
         "--docs", action="store_true", help="write the tables into docs/accuracy.md"
     )
+    parser.add_argument("--set", action="append", default=[], help="config override key=value")
     args = parser.parse_args()
     load = os.getloadavg()
-    default = load_config()
-    noisy = load_config(REPO / "config" / "noisy.yaml")
+    default = load_config(None, args.set)
+    noisy = load_config(REPO / "config" / "noisy.yaml", args.set)
     report_noise = parse_noise(["uniform:0.05"])
     rows, grav_rows = [], []
     for name in SCENES:

@@ -109,6 +109,7 @@ def main() -> None:
         for label, p in (
             ("voxel + split", ObjectParams()),
             ("knn s=1 + split", ObjectParams(method="knn", sample_fraction=1.0, k=20)),
+            ("convex + split", ObjectParams(method="convex")),
         ):
             groups, sep, missed = touching(scene, n, p)
             rows.append([scene, n, label, groups, sep, ", ".join(missed) or "-"])

@@ -146,8 +146,9 @@ class ObjectParams:
     method: str = param(
         "voxel",
         "'knn': the report's Algorithm 2 (sampled k-NN graph); 'voxel': connected "
-        "occupied voxels of a fine grid, no sampling",
-        choices=("knn", "voxel"),
+        "occupied voxels of a fine grid, no sampling; 'convex': patches joined where they "
+        "meet convexly or smoothly, cut at concave creases (touching and stacked objects)",
+        choices=("knn", "voxel", "convex"),
     )
     k: int = param(20, "knn: neighbours linked per sampled point", min=1, max=500)
     sample_fraction: float = param(
@@ -178,6 +179,35 @@ class ObjectParams:
         False,
         "split clusters that fall apart into parts standing side by side on the surface when "
         "the voxels along concave creases are removed (touching convex objects)",
+    )
+    convex_cell: float = param(
+        0.005,
+        "convex: points in 26-adjacent cells this wide are linked (wider gaps cut); the "
+        "patches are two cells wide",
+        "m",
+        min=1e-3,
+        max=0.1,
+    )
+    convex_smooth_deg: float = param(
+        25.0,
+        "convex: neighbouring patches whose normals differ by less than this stay linked "
+        "where they meet concavely (a bowl's inside)",
+        "deg",
+        min=0.0,
+        max=90.0,
+    )
+    convex_crease_curvature: float = param(
+        20.0,
+        "convex: a patch hollow toward the sensor by more than this curvature straddles a "
+        "concave crease and links nothing (it joins a neighbouring segment)",
+        "1/m",
+        min=0.0,
+    )
+    convex_band_sigma: float = param(
+        1.5e-3,
+        "convex: depth noise per squared metre of range (Kinect ~1.5e-3); points within 3 "
+        "sigma of the plane of the surface under them belong to it, never to an object",
+        min=0.0,
     )
     concave_tolerance: float = param(
         0.1,

@@ -139,7 +139,7 @@ def detect(
         # Free space needs only the connected components standing on each surface (a pile
         # occupies its surface however it is split into objects): the surfaces are complete,
         # and can go out, before touching objects are split and described.
-        components = cluster_objects(pts, surfaces, params.objects)
+        components = cluster_objects(pts, surfaces, params.objects, sensor_origin=origin)
         timings["objects"] = time.perf_counter() - t
         t = time.perf_counter()
         below = surfaces

@@ -400,7 +400,7 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     """The speed-ups of the voxel method give the same answer as the straightforward code."""
     import scipy.ndimage as ndi
 
-    import supportnode.geometry.objects as mod
+    import supportnode.geometry.objects._core as mod
 
     rng = np.random.default_rng(7)
     for _ in range(20):  # hole filling by one labelling == binary_fill_holes
@@ -541,7 +541,7 @@ def test_split_objects_finds_again_only_the_surfaces_of_split_clusters():
     (a function of the same points): the same surfaces as looking every cluster up anew."""
     from conftest import REPO
 
-    from supportnode.geometry import objects as O
+    from supportnode.geometry.objects import _core as O
     from supportnode.io.clouds import read_cloud
     from supportnode.params import DetectParams
 

@@ -81,6 +81,8 @@ def obstacles_message(
     for what, seq_ in (("ids", ids), ("points", points)):
         if seq_ is not None and len(seq_) != len(clusters):
             raise InputError(f"{what} has {len(seq_)} entries for {len(clusters)} clusters")
+    # supported_by names a detection id: it goes out as the stable id of that cluster
+    stable = {c.id: int(c.id if ids is None else ids[i]) for i, c in enumerate(clusters)}
     out = []
     for i, c in enumerate(clusters):
         sid = c.surface_id
@@ -105,6 +107,7 @@ def obstacles_message(
                 height=float(c.height),
                 point_count=int(c.point_count),
                 points=pts,
+                supported_by=stable.get(getattr(c, "supported_by", -1), -1),
             )
         )
     return ObstacleClusters(stamp=float(stamp), frame_id=frame_id, seq=seq, clusters=out)

@@ -94,6 +94,7 @@ class ObstacleCluster:
     height: float  # top above the supporting surface
     point_count: int
     points: np.ndarray | None = None  # (M, 3) subsampled points, float32 or float64
+    supported_by: int = -1  # id of the cluster it stands on, -1 when on its surface
 
 
 @dataclass(eq=False)
@@ -224,6 +225,8 @@ class ObstacleClusters(Decodable):
                 "point_count": [c.point_count for c in cs],
             },
         )
+        if any(c.supported_by != -1 for c in cs):  # OPTIONAL buffer: absent = all -1
+            cols["supported_by"] = np.array([c.supported_by for c in cs], dtype="<i8")
         if any(c.points is not None for c in cs):
             pts = [np.zeros((0, 3)) if c.points is None else np.asarray(c.points) for c in cs]
             for p in pts:
@@ -246,6 +249,7 @@ class ObstacleClusters(Decodable):
         expect_type(chk, header, cls.TYPE)
         c = _check_clusters(chk, buffers, limits)
         pts, off = c.get("points"), c.get("point_offsets")
+        by = c.get("supported_by")
         out = []
         for i in range(len(c["id"])):
             sid = int(c["surface_id"][i])
@@ -262,6 +266,7 @@ class ObstacleClusters(Decodable):
                     height=float(c["height"][i]),
                     point_count=int(c["point_count"][i]),
                     points=None if pts is None or off is None else pts[off[i] : off[i + 1]],
+                    supported_by=-1 if by is None else int(by[i]),
                 )
             )
         return cls(stamp=header.stamp, frame_id=header.frame_id, seq=header.seq, clusters=out)
@@ -383,4 +388,11 @@ def _check_clusters(
         chk.offsets(off, "point_offsets", len(c["id"]), len(pts))
         chk.finite(pts, "points")
         c.update(points=pts, point_offsets=off)
+    if "supported_by" in buffers:
+        by = chk.array(buffers, "supported_by", frozenset({"<i8"}))
+        if by.shape != c["id"].shape:
+            chk.fail(f"buffer 'supported_by' has shape {by.shape}, expected {c['id'].shape}")
+        if bool(np.any((by != -1) & ~np.isin(by, c["id"]))):
+            chk.fail("buffer 'supported_by' names a cluster id not in the message (-1: none)")
+        c["supported_by"] = by
     return c

@@ -33,6 +33,8 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
 from supportnode.geometry.memo import Memo
+from supportnode.geometry.objects.convexity import cluster_convex
+from supportnode.geometry.objects.support import supported_by
 from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import ObjectParams
 
@@ -126,6 +128,7 @@ class Cluster:
     height: float  # top above the surface height (above its own bottom when surface_id is None)
     footprint: np.ndarray  # (K, 2) float64 convex hull in x, y, counter-clockwise
     volume: float  # convex-hull volume, m^3 (0 for degenerate sets)
+    supported_by: int = -1  # id of the cluster it stands on, -1 when on its surface (or none)
 
     def to_dict(self) -> dict:
         """JSON-ready dictionary (no numpy types)."""
@@ -142,6 +145,7 @@ class Cluster:
             "height": float(self.height),
             "footprint": np.round(self.footprint, 4).tolist(),
             "volume": float(self.volume),
+            "supported_by": int(self.supported_by),
         }
 
 
@@ -233,10 +237,13 @@ def cluster_objects(
     points: np.ndarray,
     surfaces: SurfaceResult,
     params: ObjectParams | None = None,
+    sensor_origin: np.ndarray | None = None,
 ) -> Components:
     """Connected components of the points on no surface (arguments and errors as for
     :func:`detect_objects`), each with the surface it stands on: touching objects not split
-    yet. Free space is computed from these (see `supportnode.geometry.freespace`)."""
+    yet. Free space is computed from these (see `supportnode.geometry.freespace`).
+    sensor_origin: (3,) sensor position in the points' frame when known (the convex method
+    turns its normals toward it and widens the table band with range)."""
     params = params or ObjectParams()
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -257,8 +264,13 @@ def cluster_objects(
     elif params.method == "voxel":
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         lab = _cluster_voxel(cp, params.voxel_size, stats, support)
+    elif params.method == "convex":
+        support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
+        lab = cluster_convex(cp, surfaces.surfaces, support, params, sensor_origin, stats)
     else:
-        raise InputError(f"unknown object method {params.method!r}; expected 'knn' or 'voxel'")
+        raise InputError(
+            f"unknown object method {params.method!r}; expected 'knn', 'voxel' or 'convex'"
+        )
     lab = _drop_small(lab, params.min_points)
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
     seg = _order(cp, lab, lookups[1], params)
@@ -327,9 +339,34 @@ def describe_objects(seg: Segmentation, memo: Memo | None = None) -> ObjectResul
     oriented boxes, heights). memo: as for detect_objects."""
     t = time.perf_counter()
     clusters = _describe(seg, memo)
+    _stack(clusters, seg._heights)
     stats = dict(seg.stats)
     stats["time_describe_s"] = time.perf_counter() - t + stats.pop("time_order_s", 0.0)
     return ObjectResult(clusters=clusters, labels=seg.labels, stats=stats)
+
+
+def _stack(clusters: list[Cluster], heights: dict) -> None:
+    """Set each cluster's supported_by (see objects.support); a cluster standing on another
+    with no surface of its own takes the surface under its stack."""
+    if len(clusters) < 2:
+        return
+    lo = np.array([c.bbox_min for c in clusters])
+    hi = np.array([c.bbox_max for c in clusters])
+    base = np.array(
+        [np.nan if c.surface_id is None else heights.get(c.surface_id, np.nan) for c in clusters]
+    )
+    if np.isnan(base).all() and not heights:
+        return
+    by = supported_by(lo, hi, base)
+    for c, b in zip(clusters, by.tolist(), strict=True):
+        c.supported_by = int(b)
+    for c in clusters:
+        seen, k = set(), c
+        while c.surface_id is None and k.supported_by >= 0 and k.id not in seen:
+            seen.add(k.id)
+            k = clusters[k.supported_by]
+        if c.surface_id is None and k.surface_id is not None:
+            c.surface_id = k.surface_id
 
 
 # ------------------------------------------------------------------------------------ clustering
