@@ -60,6 +60,17 @@ DETECTION_PROBES: dict[str, tuple[str, str, tuple[str, ...], bool]] = {
     "objects.support_tolerance": ("kitchen", "0.2", (), False),
     "objects.split_touching": ("u_table@100000", "false", (), False),
     "objects.split_neck_width": ("kitchen", "0.01", (), False),
+    "objects.split_concave": ("shelf@539034", "true", (), False),  # dense: the report's shelf
+    "objects.concave_tolerance": ("shelf@539034", "0.002", ("objects.split_concave=true",), False),
+    "objects.convex_band_sigma": ("cluttered_table", "0.006", ("objects.method=convex",), False),
+    "objects.convex_cell": ("cluttered_table", "0.02", ("objects.method=convex",), False),
+    "objects.convex_smooth_deg": ("cluttered_table", "75.0", ("objects.method=convex",), False),
+    "objects.convex_crease_curvature": (
+        "cluttered_table",
+        "2.0",
+        ("objects.method=convex",),
+        False,
+    ),
     "freespace.cell_size": ("kitchen", "0.08", (), False),
     "freespace.margin": ("kitchen", "0.2", (), False),
     "gravity.up_hint": ("kitchen", "[1.0, 0.0, 0.0]", (), True),
