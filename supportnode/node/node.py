@@ -46,6 +46,7 @@ from supportnode.msgs import Diagnostics, PointCloud
 from supportnode.node.admission import Admission
 from supportnode.node.core import Job, MapLike, NodeCore, NodeOutput
 from supportnode.node.diagnostics import diagnostics_message
+from supportnode.node.gravity import Gravity
 from supportnode.node.intake import scan_problem
 from supportnode.node.latency import LatencyWindow
 from supportnode.node.mailbox import Mailbox
@@ -113,7 +114,7 @@ class Node(Closing):
         return self.core.map
 
     @property
-    def gravity(self) -> Any:
+    def gravity(self) -> Gravity:
         return self.core.gravity
 
     @property
