@@ -4,8 +4,8 @@ Who runs what (`spin`)::
 
     receiving thread                         mailbox            detecting thread
     subscriber -> intake (decode, checks)    (latest job)       NodeCore.detect
-      -> NodeCore.ingest (gravity, map) ---> put / take ------>   (ids, messages)
-      -> diagnostics, map messages                                -> outbox.results
+      -> NodeCore.ingest (gravity, map) ---> put / take ------>   detect_surfaces -> outbox
+      -> diagnostics, map messages                                detect_objects -> outbox
                      \\------------------> outbox (owns the publishing socket) <-/
 
 The receiving thread owns the subscriber, the intake, the gravity estimate and the map; the
@@ -316,20 +316,23 @@ class Node(Closing):
                 self._detect_and_publish(job)
 
     def _detect_and_publish(self, job: Job) -> None:
+        """Surfaces out as soon as they are known, then the obstacles of the same seq."""
         t = time.perf_counter()
+        assert self._outbox is not None
         try:
-            out = self.core.detect(job)
+            part = self.core.detect_surfaces(job)
+            self._outbox.surfaces(part.out, job.t_recv)
+            out = self.core.detect_objects(part)
         except Exception as err:
             self._wire.internal_error(f"detection of the scan at {job.stamp:.3f}", err)
             return
         out.timings["detect"] = time.perf_counter() - t
-        out.timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
-        self.latency.add_all(out.timings)
-        assert self._outbox is not None
         try:
-            self._outbox.results(out, job.t_recv)
+            self._outbox.obstacles(out, job.t_recv)
         except Exception as err:
             self._wire.internal_error(f"publishing the scan at {job.stamp:.3f}", err)
+        out.timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
+        self.latency.add_all(out.timings)
 
     # ------------------------------------------------------------------ diagnostics, map
 
