@@ -651,3 +651,33 @@ def test_cleared_region_is_detected_again(rng):
 
     # Where rays from the sensor cross (its top and the side facing the sensor) it goes.
     assert box_points_seen(outs[True][-1]) < 0.7 * box_points_seen(outs[True][2])
+
+
+def test_regional_objects_it_cannot_vouch_for_come_from_a_full_recompute(rng, monkeypatch):
+    """Surfaces go out after the first phase; when the objects of a regional detection then
+    cannot be vouched for (here: every new cluster refused), the objects are a full
+    recompute's, on the surfaces already out (same surfaces, their ids kept)."""
+    params = DetectParams()
+    pts = np.vstack([_platform(rng, 0, 0), _platform(rng, 4, 0)])
+    previous = incremental.full(pts, params)
+    box = box_points(rng, (0.2, 0.1, 0.6), (0.2, 0.2, 0.2), 2000)
+    now = np.vstack([pts, box])
+    lo, hi = np.array([0.1, 0.0]), np.array([0.3, 0.2])
+    kept = incremental._kept
+    monkeypatch.setattr(
+        incremental,
+        "_kept",
+        lambda items, *a: None if items and hasattr(items[0], "surface_id") else kept(items, *a),
+    )
+    phase = incremental.begin_regional(now, previous, lo, hi, params)
+    assert phase is not None
+    got = phase.finish()
+    want = incremental.full(now, params)
+    assert got.region is None  # not a regional result
+    assert got.surfaces is phase.surfaces and got.free is phase.free
+    height = {s.id: round(s.height, 2) for s in got.surfaces}
+    want_height = {s.id: round(s.height, 2) for s in want.surfaces}
+    assert len(got.clusters) == len(want.clusters) >= 1
+    for g, w in zip(got.clusters, want.clusters, strict=True):
+        assert g.point_count == w.point_count
+        assert height.get(g.surface_id) == want_height.get(w.surface_id)

@@ -285,11 +285,13 @@ def begin_regional_from(
         done = new.finish()
         out = Items(surfaces, [], free, [], timings=done.timings, region=(lo, hi))
         keep_c = _kept(done.clusters, lo, hi, margin)
+        if keep_c is None:
+            return _objects_of_full(fetch, surfaces, free, params, origin, free_below)
         old_c = [j for j in range(len(previous.clusters)) if not inside[n_prev_s + j]]
-        for src, idx, sid in ((previous, old_c, sid_old), (done, keep_c or [], sid_new)):
+        for src, idx, sid in ((previous, old_c, sid_old), (done, keep_c, sid_new)):
             for j in idx:
                 c = src.clusters[j]
-                if keep_c is None or (c.surface_id is not None and c.surface_id not in sid):
+                if c.surface_id is not None and c.surface_id not in sid:
                     return _objects_of_full(fetch, surfaces, free, params, origin, free_below)
                 s = None if c.surface_id is None else sid[c.surface_id]
                 out.clusters.append(dataclasses.replace(c, id=len(out.clusters), surface_id=s))
