@@ -149,6 +149,18 @@ def _base_voxels(sc) -> int:
     return len(m)
 
 
+def _wait_ready(sub, timeout: float = 180.0) -> None:
+    """Until the node's diagnostics say it is ready (kernels compiled or loaded, subscribed:
+    a fresh source tree compiles them first), then one second for the subscriptions (ZeroMQ's
+    slow joiner). A node without the ``ready`` gauge: its first diagnostics."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        msg = sub.recv(0.5)
+        if msg is not None and hasattr(msg, "gauges") and msg.gauges.get("ready", 1.0) == 1.0:
+            break
+    time.sleep(1.0)
+
+
 def _free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
@@ -207,7 +219,7 @@ def e2e(sc, rate: float, slow_consumer: float = 0.0, in_process: bool = False) -
     lat_o: list[float] = []
     diags = []
     try:
-        time.sleep(3.0)  # the node's imports, then the subscriptions (ZeroMQ's slow joiner)
+        _wait_ready(sub)
         go.set()
         t0 = time.monotonic()
         span = len(sc) / rate
@@ -343,7 +355,7 @@ def soak(sc, minutes: float, rate: float) -> dict:
     rss: list[tuple[float, float]] = []
     last = None
     try:
-        time.sleep(3.0)
+        _wait_ready(sub)
         go.set()
         t0 = time.monotonic()
         while time.monotonic() < t0 + total / rate + 2.0:

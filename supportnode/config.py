@@ -74,7 +74,7 @@ REMOVED_KEYS: dict[str, str] = {
     + " (set node.threads to bound the kernels' threads)",
     "node.surfaces_first": "removed in 0.2: "
     + _NOTHING_TO_SET
-    + " (a detection's obstacles, then its surfaces)",
+    + " (a detection's surfaces go out first, then its obstacles)",
     "node.defer_clear": "removed in 0.2: "
     + _NOTHING_TO_SET
     + " (each scan's clearing runs in its merge)",

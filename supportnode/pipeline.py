@@ -18,6 +18,7 @@ from supportnode.errors import InputError
 from supportnode.geometry.freespace import FreeSpace, free_space_all
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects import (
+    Components,
     ObjectResult,
     Segmentation,
     cluster_objects,
@@ -74,6 +75,54 @@ def _gravity_summary(g: GravityEstimate | None) -> dict:
         "reason": g.reason,
         **({"warning": g.warning} if g.warning else {}),
     }
+
+
+@dataclass
+class Early:
+    """A detection's first phase (`surfaces_stage`): its surfaces are final and have their
+    free space; the objects (`objects_stage`) continue from the components."""
+
+    surfaces: SurfaceResult
+    free: list[FreeSpace]
+    components: Components
+    timings: dict[str, float]  # seconds: objects (so far), free_space; objects_stage adds
+
+
+def surfaces_stage(
+    pts: np.ndarray,
+    surfaces: SurfaceResult,
+    params: DetectParams,
+    free_below: float | None = None,
+    timings: dict[str, float] | None = None,
+    sensor_origin: np.ndarray | None = None,
+) -> Early:
+    """Components of the (N, 3) float64 points on no surface, and the free space of the
+    surfaces lower than ``free_below`` (m; None: all). Free space needs only the connected
+    components standing on each surface (a pile occupies its surface however it is split into
+    objects): after this the surfaces are complete, and can go out, before touching objects
+    are split and described. ``timings`` (seconds) is updated in place. ``sensor_origin``: (3,)
+    in the detection frame when known (the convex method's noise band follows its range)."""
+    timings = {} if timings is None else timings
+    t = time.perf_counter()
+    components = cluster_objects(pts, surfaces, params.objects, sensor_origin=sensor_origin)
+    timings["objects"] = time.perf_counter() - t
+    t = time.perf_counter()
+    below = surfaces
+    if free_below is not None:
+        below = replace(surfaces, surfaces=[s for s in surfaces.surfaces if s.height < free_below])
+    free = free_space_all(below, components.segmentation, pts, params.freespace)
+    timings["free_space"] = time.perf_counter() - t
+    return Early(surfaces, free, components, timings)
+
+
+def objects_stage(early: Early, params: DetectParams, memo: Memo | None = None) -> ObjectResult:
+    """The objects of `surfaces_stage`'s components: touching objects split, then described
+    (hulls, boxes); adds its time to ``early.timings["objects"]``."""
+    t = time.perf_counter()
+    segmentation = split_objects(early.components, params.objects, memo)
+    result = describe_objects(segmentation, memo)
+    early.timings["objects"] = early.timings.get("objects", 0.0) + time.perf_counter() - t
+    return result
 
 
 def detect(
@@ -133,26 +182,11 @@ def detect(
     object_result = None
     free: list[FreeSpace] = []
     if objects:
-        t = time.perf_counter()
         if memo is not None:
             memo.next_round()
-        # Free space needs only the connected components standing on each surface (a pile
-        # occupies its surface however it is split into objects): the surfaces are complete,
-        # and can go out, before touching objects are split and described.
-        components = cluster_objects(pts, surfaces, params.objects, sensor_origin=origin)
-        timings["objects"] = time.perf_counter() - t
-        t = time.perf_counter()
-        below = surfaces
-        if free_below is not None:
-            below = replace(
-                surfaces, surfaces=[s for s in surfaces.surfaces if s.height < free_below]
-            )
-        free = free_space_all(below, components.segmentation, pts, params.freespace)
-        timings["free_space"] = time.perf_counter() - t
+        early = surfaces_stage(pts, surfaces, params, free_below, timings, sensor_origin=origin)
+        free = early.free
         if on_surfaces is not None:
-            on_surfaces(surfaces, free, components.segmentation)
-        t = time.perf_counter()
-        segmentation = split_objects(components, params.objects, memo)
-        object_result = describe_objects(segmentation, memo)
-        timings["objects"] += time.perf_counter() - t
+            on_surfaces(surfaces, free, early.components.segmentation)
+        object_result = objects_stage(early, params, memo)
     return Detection(surfaces, object_result, free, timings, rotation, gravity)

@@ -420,13 +420,13 @@ def test_slow_detection_over_sockets(rng, monkeypatch):
     skips to the newest (counted); results keep coming, for the newest scans."""
     from supportnode.node import incremental
 
-    full = incremental.full
+    full = incremental.begin_full
 
     def slow_full(*a, **kw):
         time.sleep(0.25)
         return full(*a, **kw)
 
-    monkeypatch.setattr(incremental, "full", slow_full)
+    monkeypatch.setattr(incremental, "begin_full", slow_full)
     pose = _sensor_pose(0, 0, 1.5)
     pts = _platform(rng, 0, 0) - pose[:3, 3]
     with _spinning("surfaces", False) as (node, pub, sub):
@@ -457,7 +457,7 @@ def _slow_stages(monkeypatch, merge_s: float, detect_s: float) -> None:
     from supportnode.map import VoxelMap
     from supportnode.node import incremental
 
-    integrate, full = VoxelMap.integrate, incremental.full
+    integrate, full = VoxelMap.integrate, incremental.begin_full
 
     def slow_integrate(self, *a, **kw):
         time.sleep(merge_s)
@@ -468,7 +468,7 @@ def _slow_stages(monkeypatch, merge_s: float, detect_s: float) -> None:
         return full(*a, **kw)
 
     monkeypatch.setattr(VoxelMap, "integrate", slow_integrate)
-    monkeypatch.setattr(incremental, "full", slow_full)
+    monkeypatch.setattr(incremental, "begin_full", slow_full)
 
 
 def test_scan_merged_after_detection_ended_is_detected(rng, monkeypatch):
@@ -549,9 +549,9 @@ def test_real_kinect_sequence_keeps_its_points_and_ids(real_scans):
     assert [len(o.surfaces.surfaces) for o in outs[3:]] == [1] * 6
 
 
-def test_obstacles_then_surfaces_over_sockets(rng):
-    """Each detection's obstacles go out before its surfaces (same seq): a planner that reacts
-    to surfaces has their obstacles. Every detection sends both."""
+def test_surfaces_then_obstacles_over_sockets(rng):
+    """Each detection's surfaces (with free space) go out as soon as they are known, before
+    its obstacles (same seq), which refer to them. Every detection sends both."""
     pose = _sensor_pose(0, 0, 1.5)
     box = box_points(rng, (0.1, 0.0, 0.6), (0.2, 0.2, 0.2), 3000)
     pts = np.vstack([_platform(rng, 0, 0), box]) - pose[:3, 3]
@@ -565,7 +565,7 @@ def test_obstacles_then_surfaces_over_sockets(rng):
                 if isinstance(msg, SupportSurfaces | ObstacleClusters):
                     order.append((msg.seq, type(msg).__name__, msg))
         d = node.diagnostics()
-    kinds = ("ObstacleClusters", "SupportSurfaces")
+    kinds = ("SupportSurfaces", "ObstacleClusters")
     assert [(s, k) for s, k, _ in order] == [(s, k) for s in (1, 2, 3) for k in kinds]
     surfaces = [m for _, k, m in order if k == "SupportSurfaces"]
     obstacles = [m for _, k, m in order if k == "ObstacleClusters"]
@@ -651,3 +651,33 @@ def test_cleared_region_is_detected_again(rng):
 
     # Where rays from the sensor cross (its top and the side facing the sensor) it goes.
     assert box_points_seen(outs[True][-1]) < 0.7 * box_points_seen(outs[True][2])
+
+
+def test_regional_objects_it_cannot_vouch_for_come_from_a_full_recompute(rng, monkeypatch):
+    """Surfaces go out after the first phase; when the objects of a regional detection then
+    cannot be vouched for (here: every new cluster refused), the objects are a full
+    recompute's, on the surfaces already out (same surfaces, their ids kept)."""
+    params = DetectParams()
+    pts = np.vstack([_platform(rng, 0, 0), _platform(rng, 4, 0)])
+    previous = incremental.full(pts, params)
+    box = box_points(rng, (0.2, 0.1, 0.6), (0.2, 0.2, 0.2), 2000)
+    now = np.vstack([pts, box])
+    lo, hi = np.array([0.1, 0.0]), np.array([0.3, 0.2])
+    kept = incremental._kept
+    monkeypatch.setattr(
+        incremental,
+        "_kept",
+        lambda items, *a: None if items and hasattr(items[0], "surface_id") else kept(items, *a),
+    )
+    phase = incremental.begin_regional(now, previous, lo, hi, params)
+    assert phase is not None
+    got = phase.finish()
+    want = incremental.full(now, params)
+    assert got.region is None  # not a regional result
+    assert got.surfaces is phase.surfaces and got.free is phase.free
+    height = {s.id: round(s.height, 2) for s in got.surfaces}
+    want_height = {s.id: round(s.height, 2) for s in want.surfaces}
+    assert len(got.clusters) == len(want.clusters) >= 1
+    for g, w in zip(got.clusters, want.clusters, strict=True):
+        assert g.point_count == w.point_count
+        assert height.get(g.surface_id) == want_height.get(w.surface_id)

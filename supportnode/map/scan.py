@@ -8,6 +8,7 @@ import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
 from supportnode.geometry.voxels import OUTER_INDEX, argsort_keys, voxelize
+from supportnode.kernels.scanvoxels import scan_voxels
 from supportnode.map.state import StoreState
 
 # The noise floor of a scan: this percentile of its dense voxels' own estimates (see
@@ -116,6 +117,13 @@ class ScanVoxelizer(StoreState):
             grid = voxelize(np.stack(cols, axis=1), np.full(3, size))  # raises when too far
             moments = np.concatenate([grid.sums, grid.outer], axis=1)
             return _ScanGrid(grid.keys, grid.counts, grid.starts, moments, grid.local)
+        if float(np.prod(dims)) <= max(8 * n, 1 << 20):
+            # Few keys in the box (the usual case): compiled, one pass over the points, a
+            # mark table of the box's keys (the same voxels, offsets and sums as below).
+            keys, voxel, counts, moments, local = scan_voxels(
+                cols, size, lo, dims, self._scan_scratch(n, int(np.prod(dims)))
+            )
+            return _ScanGrid(keys, counts, None, moments, local, voxel)
         # Linear key of each point's voxel in the scan's box, in float64 (exact: integers
         # below 2^53) and in place, converted once.
         lin_f = self._buffer("lin_f", n, np.float64)
@@ -179,6 +187,15 @@ class ScanVoxelizer(StoreState):
             np.multiply(local[a], local[b], out=prod)
             moments[:, 3 + col] = np.bincount(point_voxel, weights=prod, minlength=nvox)
         return _ScanGrid(keys, counts, None, moments, local, point_voxel)
+
+    def _scan_scratch(self, n: int, top: int) -> tuple[np.ndarray, ...]:
+        """The compiled voxelizing's scratch (`kernels.scanvoxels.scan_voxels`), kept."""
+        return (
+            self._buffer("mark", top, np.bool_),
+            self._buffer("rank", top, np.int64),
+            self._buffer("lin", n, np.int64),
+            self._buffer("local", 3 * n, np.float64).reshape(3, n),
+        )
 
     def _by_voxel(self, grid: _ScanGrid, need: np.ndarray | None = None) -> _ScanGrid:
         """``grid`` with the points of the voxels ``need`` (V,) bool (None: all) by voxel, in

@@ -32,14 +32,22 @@ from supportnode.geometry.transform import quaternion_matrix, transform_points
 from supportnode.map import VoxelMap
 from supportnode.msgs import ObstacleClusters, PointCloud, SupportSurfaces
 from supportnode.node import incremental
-from supportnode.node.gravity import Gravity, Verdict
+from supportnode.node.gravity import Gravity, report_verdict
 from supportnode.node.incremental import Items
 from supportnode.node.intake import BACKWARD_S
 from supportnode.node.latency import RateLimitedLog
 from supportnode.node.tracking import ClusterTracker, SurfaceTracker
 from supportnode.params import DetectParams
 
-__all__ = ["DETECT_COUNTERS", "INGEST_COUNTERS", "Job", "MapLike", "NodeCore", "NodeOutput"]
+__all__ = [
+    "DETECT_COUNTERS",
+    "INGEST_COUNTERS",
+    "Job",
+    "MapLike",
+    "NodeCore",
+    "NodeOutput",
+    "Partial",
+]
 
 # Horizontal planes less than this below the sensor, or above it, are ceilings and
 # undersides, not supports: the node publishes only surfaces lower than sensor z minus this, m.
@@ -118,6 +126,17 @@ class Job:
         return dataclasses.replace(self, region=(lo, hi))
 
 
+@dataclass
+class Partial:
+    """A detection half done (`NodeCore.detect_surfaces`): ``out.surfaces`` is final,
+    `NodeCore.detect_objects` adds ``out.obstacles``. sid: detection -> stable surface id."""
+
+    out: NodeOutput
+    job: Job
+    phase: incremental.Phase
+    sid: dict[int, int]
+
+
 def _empty_box() -> tuple[np.ndarray, np.ndarray]:
     return np.full(2, np.inf), np.full(2, -np.inf)
 
@@ -189,7 +208,7 @@ class NodeCore:
         failures = self.gravity.failures
         verdict = self.gravity.update(cloud, pose[:3, :3], cloud.points)
         c["gravity_failures"] += self.gravity.failures - failures
-        self._gravity_verdict(cloud, verdict)
+        report_verdict(self.log, self.cfg, self.gravity, c, cloud.seq, verdict)
         timings["gravity"] = time.perf_counter() - t
         t = time.perf_counter()
         touched = self.map.integrate(cloud.points, pose, stamp)
@@ -229,28 +248,6 @@ class NodeCore:
         frame = self.cfg.frame_id if self.posed else self.frame
         return PointCloud.from_xyz(pts.astype(np.float32), self.last_stamp, frame, seq)
 
-    def _gravity_verdict(self, cloud: PointCloud, verdict: Verdict) -> None:
-        """Count a scan's gravity outlier; log the first one and every new up adopted."""
-        if verdict is Verdict.OUTLIER:
-            self.ingest_counters["gravity_outliers"] += 1
-            if self.ingest_counters["gravity_outliers"] == 1:
-                self.log.warning(
-                    "%s: scan seq %d: its gravity is more than %g deg from the map's up %s "
-                    "(%s): not used (logged once; counted in gravity_outliers)",
-                    self.cfg.name,
-                    cloud.seq,
-                    self.cfg.gravity_max_angle_deg,
-                    np.round(self.gravity.up, 3).tolist(),
-                    self.gravity.source,
-                )
-        elif verdict is Verdict.ADOPTED:
-            self.log.info(
-                "%s: the map's up is %s, from %d scans' gravity that agree",
-                self.cfg.name,
-                np.round(self.gravity.up, 3).tolist(),
-                self.cfg.gravity_min_agreeing,
-            )
-
     def _detection_due(self, stamp: float) -> bool:
         rate = self.cfg.detection_rate
         due = (
@@ -288,7 +285,13 @@ class NodeCore:
         self._seen_generation = self.generation
 
     def detect(self, job: Job) -> NodeOutput:
-        """Detection, stable ids and messages of one job (see the module docstring)."""
+        """Detection, stable ids and messages of one job: `detect_surfaces` then
+        `detect_objects` (see the module docstring)."""
+        return self.detect_objects(self.detect_surfaces(job))
+
+    def detect_surfaces(self, job: Job) -> Partial:
+        """A detection's first phase: surfaces, their free space, stable ids and ``safe``;
+        ``out.surfaces`` is final (publish it), `detect_objects` continues."""
         if job.generation != self._seen_generation:
             self._reset_detection()  # the map was reset: ids and previous detection go
             self._seen_generation = job.generation
@@ -308,40 +311,20 @@ class NodeCore:
             and job.source[1] is not None
             and self._items_source == job.source
         )
-        items = prev if reused else None
-        if items is None and self.incremental and prev is not None and same_frame:
+        phase = incremental.Phase.done(prev) if reused and prev is not None else None
+        if phase is None and self.incremental and prev is not None and same_frame:
             lo, hi = job.region
-            items = incremental.regional(job.points, prev, lo, hi, self.params, free_below=below)
-        is_incremental = items is not None and not reused
-        if items is None:
-            items = incremental.full(job.points, self.params, free_below=below)
-        if not reused:
-            timings.update(items.timings)
-        self._items, self._items_rotation, self._items_source = items, job.rotation, job.source
-        c = self.detect_counters
-        c["detections"] += 1
-        c["incremental_detections"] += int(is_incremental)
-        c["detections_reused"] += int(reused)
-        out = self._messages(items, job, timings)
-        out.incremental, out.reused = is_incremental, reused
-        return out
-
-    def _messages(self, items: Items, job: Job, timings: dict[str, float]) -> NodeOutput:
-        """Stable ids and both messages of a detection."""
+            phase = incremental.begin_regional(
+                job.points, prev, lo, hi, self.params, free_below=below
+            )
+        if phase is None:
+            phase = incremental.begin_full(job.points, self.params, free_below=below)
         t = time.perf_counter()
         # Horizontal planes above the sensor are ceilings and undersides, not supports.
-        keep = [s for s in items.surfaces if s.height < job.sensor_z - _UNDER_SENSOR_M]
+        keep = [s for s in phase.surfaces if s.height < below]
         kept_ids = {s.id for s in keep}
         s_up = self.surface_tracker.update_surfaces(keep)
         sid = {s.id: int(i) for s, i in zip(keep, s_up.ids, strict=True)}
-        surface_of = np.array(
-            [sid.get(c.surface_id, -1) if c.surface_id is not None else -1 for c in items.clusters],
-            dtype=np.int64,
-        )
-        c_up = self.cluster_tracker.update_clusters(items.clusters, surface_of)
-        timings["track"] = time.perf_counter() - t
-
-        t = time.perf_counter()
         tracks = self.surface_tracker.tracks
         safe = [
             is_safe(
@@ -350,7 +333,7 @@ class NodeCore:
             for s, i in zip(keep, s_up.ids, strict=True)
         ]
         self._out_seq += 1
-        free = [f for f in items.free if f.surface_id in kept_ids]
+        free = [f for f in phase.free if f.surface_id in kept_ids]
         surfaces = SupportSurfaces.from_detection(
             keep,
             free,
@@ -360,13 +343,40 @@ class NodeCore:
             ids=[int(i) for i in s_up.ids],
             safe=safe,
         )
+        timings["track"] = time.perf_counter() - t
+        out = NodeOutput(surfaces, None, timings, reused=reused)
+        out.new_ids, out.gone_ids = {"surfaces": list(s_up.new)}, {"surfaces": list(s_up.gone)}
+        return Partial(out, job, phase, sid)
+
+    def detect_objects(self, part: Partial) -> NodeOutput:
+        """A detection's second phase: objects, their stable ids, ObstacleClusters of the
+        same seq; the whole `NodeOutput` (``out.surfaces`` as `detect_surfaces` made it)."""
+        out, job = part.out, part.job
+        items = part.phase.finish()
+        if not out.reused:
+            out.timings.update(items.timings)
+        self._items, self._items_rotation, self._items_source = items, job.rotation, job.source
+        out.incremental = not out.reused and items.region is not None
+        c = self.detect_counters
+        c["detections"] += 1
+        c["incremental_detections"] += int(out.incremental)
+        c["detections_reused"] += int(out.reused)
+        t = time.perf_counter()
+        sid = part.sid
+        surface_of = np.array(
+            [sid.get(c.surface_id, -1) if c.surface_id is not None else -1 for c in items.clusters],
+            dtype=np.int64,
+        )
+        c_up = self.cluster_tracker.update_clusters(items.clusters, surface_of)
+        out.timings["track"] += time.perf_counter() - t
+        t = time.perf_counter()
         clusters = [
             c
-            if c.surface_id is None or c.surface_id in kept_ids
+            if c.surface_id is None or c.surface_id in sid
             else dataclasses.replace(c, surface_id=None)
             for c in items.clusters
         ]
-        obstacles = ObstacleClusters.from_detection(
+        out.obstacles = ObstacleClusters.from_detection(
             clusters,
             job.stamp,
             job.frame,
@@ -375,13 +385,8 @@ class NodeCore:
             surface_ids=sid,
             points=items.cluster_points,
         )
-        timings["messages"] = time.perf_counter() - t
-        self.last_counts = (len(kept_ids), len(clusters))
-        return NodeOutput(
-            surfaces,
-            obstacles,
-            timings,
-            new_ids={"surfaces": list(s_up.new), "obstacles": list(c_up.new)},
-            gone_ids={"surfaces": list(s_up.gone), "obstacles": list(c_up.gone)},
-            items=items,
-        )
+        out.timings["messages"] = time.perf_counter() - t
+        out.new_ids["obstacles"], out.gone_ids["obstacles"] = list(c_up.new), list(c_up.gone)
+        self.last_counts = (len(sid), len(clusters))
+        out.items = items
+        return out

@@ -17,8 +17,10 @@ Pure numpy: no logging (the node logs the first outlier) and no sockets.
 from __future__ import annotations
 
 import collections
+import logging
 import math
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +30,7 @@ from supportnode.geometry.transform import quaternion_matrix
 from supportnode.msgs import PointCloud
 from supportnode.params import DetectParams
 
-__all__ = ["SOURCES", "Gravity", "Verdict", "observed_up"]
+__all__ = ["SOURCES", "Gravity", "Verdict", "observed_up", "report_verdict"]
 
 #: The gauge ``gravity_source`` is the index into this.
 SOURCES = ("none", "given", "estimated")
@@ -140,3 +142,34 @@ class Gravity:
     @property
     def tilt_deg(self) -> float:
         return float(np.degrees(np.arccos(np.clip(self.up[2], -1.0, 1.0))))
+
+
+def report_verdict(
+    log: logging.Logger,
+    cfg: Any,
+    gravity: Gravity,
+    counters: dict[str, int],
+    seq: int,
+    verdict: Verdict,
+) -> None:
+    """Count a scan's gravity outlier in ``counters``; log the first one and every new up
+    adopted. cfg: the node's parameters (name, gravity_max_angle_deg, gravity_min_agreeing)."""
+    if verdict is Verdict.OUTLIER:
+        counters["gravity_outliers"] += 1
+        if counters["gravity_outliers"] == 1:
+            log.warning(
+                "%s: scan seq %d: its gravity is more than %g deg from the map's up %s "
+                "(%s): not used (logged once; counted in gravity_outliers)",
+                cfg.name,
+                seq,
+                cfg.gravity_max_angle_deg,
+                np.round(gravity.up, 3).tolist(),
+                gravity.source,
+            )
+    elif verdict is Verdict.ADOPTED:
+        log.info(
+            "%s: the map's up is %s, from %d scans' gravity that agree",
+            cfg.name,
+            np.round(gravity.up, 3).tolist(),
+            cfg.gravity_min_agreeing,
+        )

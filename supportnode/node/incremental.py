@@ -20,6 +20,7 @@ Everything here is in the node's detection frame (map frame rotated to gravity).
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -27,11 +28,20 @@ import numpy as np
 
 from supportnode.geometry.freespace import FreeSpace
 from supportnode.geometry.objects import Cluster
-from supportnode.geometry.surfaces import Surface
+from supportnode.geometry.surfaces import Surface, detect_surfaces
 from supportnode.params import DetectParams
-from supportnode.pipeline import detect
+from supportnode.pipeline import objects_stage, surfaces_stage
 
-__all__ = ["Items", "full", "regional", "regional_from"]
+__all__ = [
+    "Items",
+    "Phase",
+    "begin_full",
+    "begin_regional",
+    "begin_regional_from",
+    "full",
+    "regional",
+    "regional_from",
+]
 
 # A crop holding at least this share of the map's points is not worth the bookkeeping.
 _MAX_CROP_SHARE = 0.8
@@ -67,22 +77,25 @@ def _meets(lo: np.ndarray, hi: np.ndarray, blo: np.ndarray, bhi: np.ndarray, m: 
     return bool(np.all(blo <= hi + m) and np.all(bhi >= lo - m))
 
 
-def _from_detection(
-    points: np.ndarray,
-    params: DetectParams,
-    origin: np.ndarray | None,
-    free_below: float | None = None,
-) -> Items:
-    d = detect(points, params, sensor_origin=origin, free_below=free_below)
-    clusters = d.objects.clusters if d.objects is not None else []
-    labels = d.objects.labels if d.objects is not None else np.zeros(0, np.int32)
-    return Items(
-        surfaces=list(d.surfaces.surfaces),
-        clusters=list(clusters),
-        free=list(d.free_space),
-        cluster_points=_cluster_points(points, labels, len(clusters)),
-        timings=dict(d.timings),
-    )
+@dataclass
+class Phase:
+    """A detection's first phase: ``surfaces`` (ids 0, 1, ... as in `Items`) and their
+    ``free`` space are final; `finish` computes the objects and returns the whole `Items`
+    (whose surfaces and free space are these). Two calls, so that a node can publish the
+    surfaces before the objects are split and described; no threads."""
+
+    surfaces: list[Surface]
+    free: list[FreeSpace]
+    _finish: Callable[[], Items] = field(repr=False)
+
+    def finish(self) -> Items:
+        """The objects, and with them the whole detection (call once)."""
+        return self._finish()
+
+    @staticmethod
+    def done(items: Items) -> Phase:
+        """The phase of a detection already complete (a reused one)."""
+        return Phase(items.surfaces, items.free, lambda: items)
 
 
 def _cluster_points(points: np.ndarray, labels: np.ndarray, n: int) -> list[np.ndarray]:
@@ -101,6 +114,33 @@ def _cluster_points(points: np.ndarray, labels: np.ndarray, n: int) -> list[np.n
     return out
 
 
+def begin_full(
+    points: np.ndarray,
+    params: DetectParams,
+    origin: np.ndarray | None = None,
+    free_below: float | None = None,
+) -> Phase:
+    """`full`'s first phase: surfaces, components, free space (`pipeline.surfaces_stage`)."""
+    pts = np.asarray(points, dtype=np.float64)
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    sr = detect_surfaces(pts, params.surfaces, sensor_origin=origin)
+    timings["surfaces"] = time.perf_counter() - t
+    early = surfaces_stage(pts, sr, params, free_below, timings)
+
+    def finish() -> Items:
+        objects = objects_stage(early, params)
+        return Items(
+            surfaces=list(sr.surfaces),
+            clusters=list(objects.clusters),
+            free=list(early.free),
+            cluster_points=_cluster_points(pts, objects.labels, len(objects.clusters)),
+            timings=timings,
+        )
+
+    return Phase(list(sr.surfaces), list(early.free), finish)
+
+
 def full(
     points: np.ndarray,
     params: DetectParams,
@@ -109,7 +149,7 @@ def full(
 ) -> Items:
     """Detection on all of ``points`` (N, 3), metres, z up. free_below: free space only for
     surfaces lower than this, metres (None: all; see `pipeline.detect`)."""
-    return _from_detection(points, params, origin, free_below)
+    return begin_full(points, params, origin, free_below).finish()
 
 
 def regional(
@@ -125,13 +165,28 @@ def regional(
     """Detection equal to ``full(points, free_below=free_below)`` when only the x, y box
     [lo, hi] (2,) changed since ``previous`` was computed on the map; None when that cannot
     be guaranteed cheaply."""
+    phase = begin_regional(points, previous, lo, hi, params, origin, margin, free_below)
+    return None if phase is None else phase.finish()
+
+
+def begin_regional(
+    points: np.ndarray,
+    previous: Items,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    params: DetectParams,
+    origin: np.ndarray | None = None,
+    margin: float = 0.5,
+    free_below: float | None = None,
+) -> Phase | None:
+    """`regional`'s first phase (surfaces and free space; `Phase.finish` the rest)."""
 
     def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
         xy = points[:, :2]
         in_crop = np.all((xy >= blo) & (xy <= bhi), axis=1)
         return None if in_crop.sum() >= max_share * len(points) else points[in_crop]
 
-    return regional_from(fetch, previous, lo, hi, params, origin, margin, free_below)
+    return begin_regional_from(fetch, previous, lo, hi, params, origin, margin, free_below)
 
 
 def regional_from(
@@ -149,12 +204,12 @@ def regional_from(
     least ``max_share`` of the map (then a full recompute is cheaper). The node fetches from
     its voxel map, so the cost of a scan does not grow with the parts of the map it did not
     touch."""
-    if not previous.has_free_space_below(free_below):
-        return None  # unchanged surfaces that now need their free space lack it
-    lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
-        return None
-    boxes = [_box(s) for s in previous.surfaces] + [_box(c) for c in previous.clusters]
+    phase = begin_regional_from(fetch, previous, lo, hi, params, origin, margin, free_below)
+    return None if phase is None else phase.finish()
+
+
+def _inside(boxes: list, lo: np.ndarray, hi: np.ndarray, margin: float) -> tuple:
+    """The region closed over the items' boxes: (inside mask, lo, hi)."""
     inside = np.zeros(len(boxes), bool)
     grew = True
     while grew:  # closure: a few rounds, each a loop over the (tens of) items
@@ -164,52 +219,115 @@ def regional_from(
                 inside[i] = True
                 lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
                 grew = True
+    return inside, lo, hi
+
+
+def _kept(items: list, lo: np.ndarray, hi: np.ndarray, margin: float) -> list[int] | None:
+    """Indices of the new items that meet the region; None when one of them reaches beyond
+    region + margin (the crop may have cut it)."""
+    keep = []
+    for j, item in enumerate(items):
+        blo, bhi = _box(item)
+        if not _meets(lo, hi, blo, bhi, margin):
+            continue  # entirely in the context band: a piece of an unchanged item
+        if np.any(blo < lo - margin) or np.any(bhi > hi + margin):
+            return None
+        keep.append(j)
+    return keep
+
+
+def begin_regional_from(
+    fetch: Callable[[np.ndarray, np.ndarray, float], np.ndarray | None],
+    previous: Items,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    params: DetectParams,
+    origin: np.ndarray | None = None,
+    margin: float = 0.5,
+    free_below: float | None = None,
+) -> Phase | None:
+    """`regional_from`'s first phase: None when the surfaces cannot be vouched for. Its
+    `Phase.finish` checks the objects the same way; when those cannot be vouched for (a new
+    cluster cut by the crop, or on a surface left out) the objects come from a full
+    recompute, their surfaces matched to this phase's: the surfaces may have gone out."""
+    if not previous.has_free_space_below(free_below):
+        return None  # unchanged surfaces that now need their free space lack it
+    lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or np.any(lo > hi):
+        return None
+    boxes = [_box(s) for s in previous.surfaces] + [_box(c) for c in previous.clusters]
+    inside, lo, hi = _inside(boxes, lo, hi, margin)
     crop = fetch(lo - 2 * margin, hi + 2 * margin, _MAX_CROP_SHARE)
     if crop is None:
         return None
-    new = _from_detection(crop, params, origin, free_below=free_below)
-    # New items meeting the region must lie within region + margin; items entirely in the
-    # context band are pieces of unchanged items, which `previous` holds whole.
-    keep_s = []
-    for s in new.surfaces:
-        blo, bhi = _box(s)
-        if not _meets(lo, hi, blo, bhi, margin):
-            continue
-        if np.any(blo < lo - margin) or np.any(bhi > hi + margin):
-            return None
-        keep_s.append(s)
-    keep_c = []
-    for j, c in enumerate(new.clusters):
-        blo, bhi = _box(c)
-        if not _meets(lo, hi, blo, bhi, margin):
-            continue
-        if np.any(blo < lo - margin) or np.any(bhi > hi + margin):
-            return None
-        keep_c.append(j)
+    new = begin_full(crop, params, origin, free_below=free_below)
+    keep = _kept(new.surfaces, lo, hi, margin)
+    if keep is None:
+        return None
+    keep_s = [new.surfaces[j] for j in keep]
     n_prev_s = len(previous.surfaces)
     old_s = [s for i, s in enumerate(previous.surfaces) if not inside[i]]
-    old_c = [j for j in range(len(previous.clusters)) if not inside[n_prev_s + j]]
-    # A kept cluster stands on a kept surface: its surface met the region only if it did.
-    out = Items(timings=new.timings, region=(lo, hi))
     sid_old = {s.id: k for k, s in enumerate(old_s)}
     sid_new = {s.id: len(old_s) + k for k, s in enumerate(keep_s)}
-    out.surfaces = [dataclasses.replace(s, id=k) for k, s in enumerate(old_s + keep_s)]
-    out.free = [
+    surfaces = [dataclasses.replace(s, id=k) for k, s in enumerate(old_s + keep_s)]
+    free = [
         dataclasses.replace(f, surface_id=sid_old[f.surface_id])
         for f in previous.free
         if f.surface_id in sid_old
     ]
-    out.free += [
+    free += [
         dataclasses.replace(f, surface_id=sid_new[f.surface_id])
         for f in new.free
         if f.surface_id in sid_new
     ]
-    for src, idx, sid in ((previous, old_c, sid_old), (new, keep_c, sid_new)):
-        for j in idx:
-            c = src.clusters[j]
-            if c.surface_id is not None and c.surface_id not in sid:
-                return None  # its surface was left out: the merge would be inconsistent
-            s = None if c.surface_id is None else sid[c.surface_id]
-            out.clusters.append(dataclasses.replace(c, id=len(out.clusters), surface_id=s))
-            out.cluster_points.append(src.cluster_points[j])
-    return out
+
+    def finish() -> Items:
+        done = new.finish()
+        out = Items(surfaces, [], free, [], timings=done.timings, region=(lo, hi))
+        keep_c = _kept(done.clusters, lo, hi, margin)
+        if keep_c is None:
+            return _objects_of_full(fetch, surfaces, free, params, origin, free_below)
+        old_c = [j for j in range(len(previous.clusters)) if not inside[n_prev_s + j]]
+        for src, idx, sid in ((previous, old_c, sid_old), (done, keep_c, sid_new)):
+            for j in idx:
+                c = src.clusters[j]
+                if c.surface_id is not None and c.surface_id not in sid:
+                    return _objects_of_full(fetch, surfaces, free, params, origin, free_below)
+                s = None if c.surface_id is None else sid[c.surface_id]
+                out.clusters.append(dataclasses.replace(c, id=len(out.clusters), surface_id=s))
+                out.cluster_points.append(src.cluster_points[j])
+        return out
+
+    return Phase(surfaces, free, finish)
+
+
+def _objects_of_full(
+    fetch: Callable[[np.ndarray, np.ndarray, float], np.ndarray | None],
+    surfaces: list[Surface],
+    free: list[FreeSpace],
+    params: DetectParams,
+    origin: np.ndarray | None,
+    free_below: float | None,
+) -> Items:
+    """The clusters of a full recompute, their surface ids those of the equal ``surfaces``
+    (a full recompute finds the same surfaces, listed in another order)."""
+    everything = fetch(np.full(2, -np.inf), np.full(2, np.inf), np.inf)
+    assert everything is not None  # no share reaches infinity
+    whole = full(everything, params, origin, free_below)
+
+    def key(s: Surface) -> np.ndarray:
+        return np.array([s.height, *s.bbox_min, *s.bbox_max], float)
+
+    ours = [key(s) for s in surfaces]
+    to_ours: dict[int, int] = {}
+    for s in whole.surfaces:
+        match = [k for k, o in enumerate(ours) if np.allclose(o, key(s), atol=1e-9)]
+        if match:
+            to_ours[s.id] = match[0]
+    clusters = [
+        dataclasses.replace(c, surface_id=to_ours.get(c.surface_id))
+        if c.surface_id is not None
+        else c
+        for c in whole.clusters
+    ]
+    return Items(surfaces, clusters, free, whole.cluster_points, timings=whole.timings)

@@ -4,8 +4,8 @@ Who runs what (`spin`)::
 
     receiving thread                         mailbox            detecting thread
     subscriber -> intake (decode, checks)    (latest job)       NodeCore.detect
-      -> NodeCore.ingest (gravity, map) ---> put / take ------>   (ids, messages)
-      -> diagnostics, map messages                                -> outbox.results
+      -> NodeCore.ingest (gravity, map) ---> put / take ------>   detect_surfaces -> outbox
+      -> diagnostics, map messages                                detect_objects -> outbox
                      \\------------------> outbox (owns the publishing socket) <-/
 
 The receiving thread owns the subscriber, the intake, the gravity estimate and the map; the
@@ -46,6 +46,7 @@ from supportnode.msgs import Diagnostics, PointCloud
 from supportnode.node.admission import Admission
 from supportnode.node.core import Job, MapLike, NodeCore, NodeOutput
 from supportnode.node.diagnostics import diagnostics_message
+from supportnode.node.gravity import Gravity
 from supportnode.node.intake import scan_problem
 from supportnode.node.latency import LatencyWindow
 from supportnode.node.mailbox import Mailbox
@@ -113,7 +114,7 @@ class Node(Closing):
         return self.core.map
 
     @property
-    def gravity(self) -> Any:
+    def gravity(self) -> Gravity:
         return self.core.gravity
 
     @property
@@ -315,20 +316,23 @@ class Node(Closing):
                 self._detect_and_publish(job)
 
     def _detect_and_publish(self, job: Job) -> None:
+        """Surfaces out as soon as they are known, then the obstacles of the same seq."""
         t = time.perf_counter()
+        assert self._outbox is not None
         try:
-            out = self.core.detect(job)
+            part = self.core.detect_surfaces(job)
+            self._outbox.surfaces(part.out, job.t_recv)
+            out = self.core.detect_objects(part)
         except Exception as err:
             self._wire.internal_error(f"detection of the scan at {job.stamp:.3f}", err)
             return
         out.timings["detect"] = time.perf_counter() - t
-        out.timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
-        self.latency.add_all(out.timings)
-        assert self._outbox is not None
         try:
-            self._outbox.results(out, job.t_recv)
+            self._outbox.obstacles(out, job.t_recv)
         except Exception as err:
             self._wire.internal_error(f"publishing the scan at {job.stamp:.3f}", err)
+        out.timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
+        self.latency.add_all(out.timings)
 
     # ------------------------------------------------------------------ diagnostics, map
 

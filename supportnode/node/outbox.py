@@ -18,8 +18,8 @@ class Outbox:
     receiving thread diagnostics and the map; a ZeroMQ socket is not thread-safe, so each
     send holds the outbox's lock (sends take microseconds: nobody waits long).
 
-    Order: a detection's obstacles, then its surfaces (same ``seq``), so a planner that reacts
-    to surfaces already has their obstacles.
+    Order: a detection's surfaces (with their free space) as soon as they are known, then
+    its obstacles (same ``seq``) once the objects are split and described.
     """
 
     def __init__(
@@ -33,18 +33,27 @@ class Outbox:
         self._latency = latency
         self._lock = threading.Lock()
 
-    def results(self, out: NodeOutput, t_recv: float) -> None:
-        """Send a detection's messages; time encoding and sending, and receive -> sent."""
-        assert out.surfaces is not None and out.obstacles is not None
+    def surfaces(self, out: NodeOutput, t_recv: float) -> None:
+        """Send a detection's SupportSurfaces; time it, and receive -> surfaces sent."""
+        assert out.surfaces is not None
         t = time.perf_counter()
-        obstacles = out.obstacles.encode(self._obstacles_topic)
-        surfaces = out.surfaces.encode(self._surfaces_topic)
-        self.send_all((obstacles, surfaces))
+        self.send(out.surfaces.encode(self._surfaces_topic))
         out.timings["publish"] = time.perf_counter() - t
+        self._latency.add("receive_to_surfaces", time.perf_counter() - t_recv)
+
+    def obstacles(self, out: NodeOutput, t_recv: float) -> None:
+        """Send a detection's ObstacleClusters; time it, and receive -> both sent."""
+        assert out.obstacles is not None
+        t = time.perf_counter()
+        self.send(out.obstacles.encode(self._obstacles_topic))
+        out.timings["publish"] = out.timings.get("publish", 0.0) + time.perf_counter() - t
         self._latency.add("publish", out.timings["publish"])
-        done = time.perf_counter() - t_recv
-        self._latency.add("receive_to_publish", done)
-        self._latency.add("receive_to_surfaces", done)
+        self._latency.add("receive_to_publish", time.perf_counter() - t_recv)
+
+    def results(self, out: NodeOutput, t_recv: float) -> None:
+        """Send both of a detection's messages, surfaces first."""
+        self.surfaces(out, t_recv)
+        self.obstacles(out, t_recv)
 
     def send_all(self, messages: Sequence[bus.Frames | Sequence[bytes]]) -> None:
         """Send whole messages one after the other, none of another thread in between."""
