@@ -13,7 +13,7 @@ from mcap.writer import Writer
 from supportnode.cli.echo import format_message
 from supportnode.msgs import PointCloud
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _foreign_mcap(path: Path) -> None:

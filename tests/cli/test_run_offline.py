@@ -18,7 +18,7 @@ from conftest import run_cli
 from supportnode.io.recording import McapFile
 from supportnode.msgs import decode_any
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 RECORDING = REPO / "sim_scans" / "table_chairs_lidar.mcap"  # 5 posed OS-128 scans at 10 Hz
 
 

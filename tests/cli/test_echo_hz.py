@@ -21,7 +21,7 @@ import pytest
 from supportnode.client import Publisher
 from supportnode.msgs import SupportSurface, SupportSurfaces
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 class Cli:

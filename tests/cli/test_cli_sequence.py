@@ -16,7 +16,7 @@ from supportnode.io.recording import McapFile
 from supportnode.io.scans import ScanSelection
 from supportnode.msgs import decode_any
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 FRAMES = REPO / "sim_scans" / "shelf_lidar"  # 5 posed frames at 10 Hz
 RECORDING = REPO / "sim_scans" / "shelf_lidar.mcap"
 

@@ -23,7 +23,7 @@ from supportnode.io.recording import McapFile
 from supportnode.io.sources import FolderSource, open_source
 from supportnode.msgs import Diagnostics, LatencyStats, PointCloud
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def as_bytes(frames) -> list[bytes]:
