@@ -691,5 +691,7 @@ def test_removed_normals_section_names_its_replacement(tmp_path: Path) -> None:
         f"{path}:1: key 'normals' was removed in 0.2: use surfaces.normal_filter_k and "
         "surfaces.clutter_normal_k"
     )
-    with pytest.raises(ConfigError, match="normals.k=20: key 'normals' was removed in 0.2: use surfaces"):
+    with pytest.raises(
+        ConfigError, match=r"normals\.k=20: key 'normals' was removed in 0\.2: use surfaces"
+    ):
         load_config(None, ["normals.k=20"])

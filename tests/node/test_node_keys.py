@@ -116,7 +116,7 @@ def test_reject_log_period_rate_limits_the_reject_lines(caplog) -> None:
     def lines(period: float) -> int:
         caplog.clear()
         with Node(_params(reject_log_period=period)) as node:
-            for seq in range(1, 6):
+            for _ in range(5):
                 node.handle([b"scan", b"not a message"])
         return sum(
             "not a message" in r.getMessage() or "reject" in r.getMessage().lower()
