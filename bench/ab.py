@@ -16,7 +16,7 @@ of the package, on PYTHONPATH and as the working directory, so that what the scr
 added on one side only.
 
     python bench/ab.py --a HEAD~1 -- bench/bench_node.py --only e2e
-    python bench/ab.py --b-args "--set node.surfaces_first=false" -- bench/bench_node.py --only e2e
+    python bench/ab.py --b-args "--set node.threads=1" -- bench/bench_node.py --only e2e
 """
 
 from __future__ import annotations
