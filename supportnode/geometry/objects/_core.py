@@ -34,6 +34,7 @@ from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.convexity import cluster_convex
+from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.geometry.objects.support import supported_by
 from supportnode.geometry.surfaces import Surface, SurfaceResult
 from supportnode.params import ObjectParams
@@ -403,19 +404,6 @@ def _cluster_knn(cp: np.ndarray, params: ObjectParams, stats: dict) -> np.ndarra
     return lab
 
 
-# The 13 "forward" offsets of the 26-neighbourhood: each undirected voxel pair is tested once.
-_FORWARD = np.array(
-    [
-        (dx, dy, dz)
-        for dx in (-1, 0, 1)
-        for dy in (-1, 0, 1)
-        for dz in (-1, 0, 1)
-        if (dx, dy, dz) > (0, 0, 0)
-    ],
-    dtype=np.int64,
-)
-
-
 def _support_below(
     cp: np.ndarray,
     surfaces: list[Surface],
@@ -546,7 +534,7 @@ def _cluster_voxel(
         vid = np.empty(cells, dtype=np.int32 if nv < 2**31 else np.int64)
         vid[vkeys] = np.arange(nv)
         inv = vid[keys].astype(np.int64)
-        for off in _FORWARD @ strides:  # 13 vectorised look-ups, not a loop over voxels
+        for off in FORWARD_26 @ strides:  # 13 vectorised look-ups, not a loop over voxels
             nbk = vkeys + off  # never out of range: the empty border absorbs every offset
             hit = np.flatnonzero(occupied[nbk])
             rows.append(hit)
@@ -554,7 +542,7 @@ def _cluster_voxel(
     else:
         vkeys, inv = np.unique(keys, return_inverse=True)
         nv = len(vkeys)
-        for off in _FORWARD @ strides:
+        for off in FORWARD_26 @ strides:
             pos = np.searchsorted(vkeys, vkeys + off)
             pos = np.minimum(pos, nv - 1)
             hit = np.flatnonzero(vkeys[pos] == vkeys + off)
@@ -818,7 +806,7 @@ def _split_concave(p: np.ndarray, voxel: float, tol: float, min_points: int) -> 
     normal[flip] *= -1.0
     good = cnt >= _CONCAVE_MIN_POINTS
     rows, cols = [], []
-    for off in _FORWARD @ strides:  # 13 vectorised look-ups, not a loop over voxels
+    for off in FORWARD_26 @ strides:  # 13 vectorised look-ups, not a loop over voxels
         pos = np.minimum(np.searchsorted(vkeys, vkeys + off), nv - 1)
         hit = np.flatnonzero(vkeys[pos] == vkeys + off)
         rows.append(hit)

@@ -14,21 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.kernels.components import label_edges
 
 _MIN_PER_CELL = 3  # median points per occupied fine cell
 _MAX_CELL = 0.04  # metres: the grid stops growing here (gaps of a few cm cut)
-# The 13 offsets of half the 26-neighbourhood: each adjacent pair is found once.
-_HALF = np.array(
-    [
-        (dx, dy, dz)
-        for dx in (-1, 0, 1)
-        for dy in (-1, 0, 1)
-        for dz in (-1, 0, 1)
-        if (dx, dy, dz) > (0, 0, 0)
-    ],
-    dtype=np.int64,
-)
 
 
 def convex_segments(
@@ -129,7 +119,7 @@ def _patch_links(
     fine_keys: np.ndarray, dims: np.ndarray, patch_of_fine: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Unique pairs (src < dst) of patches holding 26-adjacent occupied fine cells."""
-    steps = (_HALF[:, 0] * dims[1] + _HALF[:, 1]) * dims[2] + _HALF[:, 2]
+    steps = (FORWARD_26[:, 0] * dims[1] + FORWARD_26[:, 1]) * dims[2] + FORWARD_26[:, 2]
     a_all, b_all = [], []
     for step in steps:
         want = fine_keys + step
