@@ -69,6 +69,18 @@ class SurfaceParams:
         "m",
         min=0.0,
     )
+    band_sigmas: float = param(
+        3.5,
+        "planar: a point is on a surface within this many sigma of its plane, sigma the "
+        "surface's own noise at the point's range (measured on it; 0: point_tolerance alone)",
+        min=0.0,
+    )
+    band_min: float = param(
+        0.003,
+        "planar: the noise band is never thinner than this (noise-free clouds)",
+        "m",
+        min=0.0,
+    )
     bridge_cells: int = param(
         1,
         "planar: empty cells a surface may span between level voxels of the same plane "
@@ -92,8 +104,8 @@ class SurfaceParams:
     clutter_normal_k: int = param(
         10,
         "planar: neighbours for the normals that vet surface points in cluttered voxels "
-        "(tilted by more than normal_filter_max_tilt_deg: not on the surface)",
-        min=3,
+        "(tilted by more than normal_filter_max_tilt_deg: not on the surface); 0: no vetting",
+        min=0,
         max=100,
     )
     normal_filter: bool = param(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.errors import InputError
+from supportnode.geometry.surfaces.band import label_in_band, label_ring
 from supportnode.geometry.surfaces.clutter import (
     _absorb_clutter,
     _reject_tilted_clutter,
@@ -17,7 +18,6 @@ from supportnode.geometry.surfaces.planar import (
     _connect,
     _filter_components,
     _grow_planar,
-    _label_points_planar,
     _surface_tolerance,
 )
 from supportnode.geometry.surfaces.result import SurfaceResult
@@ -74,11 +74,14 @@ def detect_surfaces(
             if edges
             else 0
         )
-        sorted_labels = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
-        vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
-        stats["clutter_points_rejected"] = _reject_tilted_clutter(
-            grid, index, sorted_labels, vetted, params
+        sorted_labels, best, band = label_in_band(
+            grid, index, surface_of_voxel, planes, tolerance, sensor_origin, params
         )
+        if params.clutter_normal_k > 0:
+            vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
+            stats["clutter_points_rejected"] = _reject_tilted_clutter(
+                grid, index, sorted_labels, vetted, params
+            )
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
     # Surface ids by the points' labels so far (lut[label], -1 for -1): one gather of all
@@ -88,6 +91,8 @@ def detect_surfaces(
     )
     if params.method == "planar":
         surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
+        if band is not None and surfaces:
+            _fill_ring(grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces)
     # Outlines only of the surfaces kept, all traced together.
     cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
@@ -143,3 +148,15 @@ def _grow_seed(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, dict
     surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
     surface_of_voxel[occupied[good]] = comp[good]
     return surface_of_voxel, {"occupied_voxels": len(occupied)}
+
+
+def _fill_ring(grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces):
+    """The band's ring pass (:func:`label_ring`) for the surfaces kept; their point counts
+    follow."""
+    n_comp = int(surface_of_voxel.max()) + 1
+    m = min(n_comp, len(lut) - 1)  # lut's last entry maps -1
+    kept = np.zeros(n_comp, dtype=bool)
+    kept[:m] = lut[:m] >= 0
+    added = label_ring(grid, index, surface_of_voxel, kept, planes, sorted_labels, best, band)
+    for comp in np.flatnonzero(added):
+        surfaces[lut[comp]].point_count += int(added[comp])

@@ -1,0 +1,227 @@
+"""The noise band of a surface: which points lie on it, judged by the sensor's noise.
+
+A fixed tolerance is wrong both ways on a depth camera: 1 cm keeps the bottom centimetre of
+every object on the table (2-5 % of an object's points) and a bowl's inner bottom, while far
+from the camera the table's own noise outgrows it. Each surface measures its noise instead:
+the spread of its points about their voxels' planes, by range from the sensor, fitted as
+``sigma(r)^2 = a^2 + (b r^2)^2`` (a depth camera's error grows with the square of the range;
+``b = 0`` without a sensor). A point is on the surface within ``k sigma(r)`` of its plane,
+never closer than ``band_min`` nor farther than the growth's tolerance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.surfaces.planar import _label_by_plane_of, _label_points_planar, _Planes
+from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
+from supportnode.params import SurfaceParams
+
+# Range bins for the fit, metres wide; a bin needs this many points to count.
+_BIN = 0.2
+_BIN_MIN_POINTS = 50
+# Robust sigma from the median absolute residual of a normal distribution.
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Per surface: sigma(r) = sqrt(a^2 + (b r^2)^2), metres (a: (S,) m, b: (S,) 1/m)."""
+
+    a: np.ndarray
+    b: np.ndarray
+
+    def sigma(self, surface: np.ndarray, r: np.ndarray | float) -> np.ndarray:
+        """(K,) noise of ``surface`` (K,) ids at range ``r`` (K,) or scalar, metres."""
+        r2 = np.asarray(r, dtype=np.float64) ** 2
+        return np.hypot(self.a[surface], self.b[surface] * r2)
+
+
+def fit_noise(
+    surface: np.ndarray, residual: np.ndarray, r: np.ndarray | None, n_surfaces: int
+) -> NoiseModel:
+    """The noise model of each surface from its labelled points.
+
+    surface: (P,) int surface id of each labelled point; residual: (P,) float64 its distance
+    to its voxel's plane, metres; r: (P,) its range from the sensor, metres, or None when the
+    sensor is unknown (sigma then does not vary with range). Per range bin the robust sigma
+    (1.4826 x the median residual) is taken, then ``a^2 + b^2 r^4`` fitted to the bins'
+    variances by least squares weighted by their points, with a, b >= 0."""
+    a = np.zeros(n_surfaces)
+    b = np.zeros(n_surfaces)
+    if len(surface) == 0:
+        return NoiseModel(a, b)
+    rb = np.zeros(len(surface), np.int64) if r is None else np.floor(r / _BIN).astype(np.int64)
+    nb = int(rb.max()) + 1
+    key = surface.astype(np.int64) * nb + rb
+    order = np.lexsort((residual, key))
+    key, res = key[order], residual[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    counts = np.diff(np.r_[starts, len(key)])
+    med = res[starts + counts // 2]
+    sid, bin_ = key[starts] // nb, key[starts] % nb
+    var = (_MAD_TO_SIGMA * med) ** 2
+    r4 = ((bin_ + 0.5) * _BIN) ** 4
+    for s in np.unique(sid):
+        m = sid == s
+        ok = m & (counts >= _BIN_MIN_POINTS)
+        if not ok.any():
+            ok = m & (counts == counts[m].max())
+        a[s], b[s] = _fit_bins(var[ok], r4[ok], counts[ok].astype(np.float64), r is not None)
+    return NoiseModel(a, b)
+
+
+def _fit_bins(var: np.ndarray, r4: np.ndarray, w: np.ndarray, ranged: bool) -> tuple[float, float]:
+    """(a, b) >= 0 of var = a^2 + b^2 r4, weighted least squares over the bins."""
+    if not ranged or len(var) < 2 or np.ptp(r4) <= 0:
+        return float(np.sqrt(np.average(var, weights=w))), 0.0
+    design = np.stack([np.ones_like(r4), r4], axis=1) * np.sqrt(w)[:, None]
+    (a2, b2), *_ = np.linalg.lstsq(design, var * np.sqrt(w), rcond=None)
+    if b2 < 0:
+        return float(np.sqrt(np.average(var, weights=w))), 0.0
+    if a2 < 0:
+        return 0.0, float(np.sqrt(np.sum(w * var * r4) / np.sum(w * r4 * r4)))
+    return float(np.sqrt(a2)), float(np.sqrt(b2))
+
+
+@dataclass(frozen=True)
+class Band:
+    """Each surface's noise band: ``width(surface, voxel)`` (K,) metres for surface ids (K,)
+    and the grid's voxels (K,) holding the points, from the model and the voxels' range."""
+
+    model: NoiseModel
+    sigmas: float
+    floor: float
+    r_voxel: np.ndarray | None  # (M,) range of each voxel's centre from the sensor, m
+
+    def width(self, surface: np.ndarray, voxel: np.ndarray) -> np.ndarray:
+        r = 0.0 if self.r_voxel is None else self.r_voxel[voxel]
+        return np.maximum(self.sigmas * self.model.sigma(surface, r), self.floor)
+
+
+def label_in_band(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    tolerance: np.ndarray,
+    sensor_origin: np.ndarray | None,
+    params: SurfaceParams,
+) -> tuple[np.ndarray, np.ndarray, Band | None]:
+    """Surface labels in the grid's voxel order (as ``_label_points_planar``), the points'
+    distances to their planes, and the surfaces' noise band (by surface component; None
+    when ``params.band_sigmas`` is 0: ``tolerance`` alone).
+
+    The points within the growth's ``tolerance`` (per component) measure each surface's
+    noise; the labels are then redone within ``params.band_sigmas`` sigma at the range of
+    each point's voxel, at least ``params.band_min``, at most ``tolerance``."""
+    labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
+    if params.band_sigmas <= 0 or not (labels >= 0).any():
+        return labels, best, None
+    refit_planes(grid, index, surface_of_voxel, planes, labels)
+    labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
+    on = np.flatnonzero(labels >= 0)
+    voxel = np.repeat(np.arange(len(grid.counts)), grid.counts)
+    r_voxel = None
+    if sensor_origin is not None:
+        centre = (grid.keys + 0.5) * grid.size
+        r_voxel = np.linalg.norm(centre - np.asarray(sensor_origin, np.float64), axis=1)
+    model = fit_noise(
+        labels[on], best[on], None if r_voxel is None else r_voxel[voxel[on]], len(tolerance)
+    )
+    band = Band(model, params.band_sigmas, params.band_min, r_voxel)
+    labels, best = _label_points_planar(
+        grid, index, surface_of_voxel, planes, tolerance, band.width
+    )
+    return labels, best, band
+
+
+# The voxels beside a surface voxel (and a layer up or down) that the ring pass labels.
+_RING = [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if x or y]
+
+
+def label_ring(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    kept: np.ndarray,
+    planes: _Planes,
+    labels: np.ndarray,
+    best: np.ndarray,
+    band: Band,
+) -> np.ndarray:
+    """Label, in place, points of the voxels around the kept surfaces' voxels that are no
+    kept surface's voxel themselves, within the band of the neighbouring surface voxel's plane (the
+    nearest plane wins): a surface's cluttered columns that growth left out (a can's foot
+    beside the table leaves the table around it unlabelled otherwise). kept: (C,) bool per
+    surface component. Returns (C,) the points added per component."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    sv = sv[kept[surface_of_voxel[sv]]]
+    before = labels.copy()
+    for hit in index.neighbours_many(sv, _RING, grid.keys):
+        on = hit >= 0
+        other = surface_of_voxel[hit[on]]
+        on[on] = (other < 0) | ~kept[np.maximum(other, 0)]
+        vsel, t = hit[on], sv[on]
+        if len(vsel):
+            surf = surface_of_voxel[t]
+            _label_by_plane_of(grid, planes, t, vsel, surf, band.width(surf, vsel), labels, best, True)
+    new = labels[(labels >= 0) & (before < 0)]
+    return np.bincount(new, minlength=len(kept))
+
+
+# The window of voxels whose inliers refit a surface voxel's plane (3 x 3 columns, +-1 layer).
+_WINDOW = [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)]
+
+
+def refit_planes(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    labels: np.ndarray,
+) -> None:
+    """Refit, in place, each surface voxel's plane to the labelled points of its surface in
+    the voxels around it (3 x 3 columns): a voxel holding an object's foot fits a plane
+    tilted toward it, which a narrow band then misses on the table side; its neighbours'
+    inliers outvote the foot. labels: (N,) surface component per point in the grid's voxel
+    order, -1 for none."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    at = np.flatnonzero(labels >= 0)
+    if len(sv) == 0 or len(at) == 0:
+        return
+    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[at]
+    n_vox = len(grid.counts)
+    # Moments per voxel of its labelled points, about the grid's origin (metres).
+    xyz = [grid.local[a][at] + grid.keys[vox, a] * grid.size[a] for a in range(3)]
+    count = np.bincount(vox, minlength=n_vox).astype(np.float64)
+    s1 = [np.bincount(vox, xyz[a], n_vox) for a in range(3)]
+    s2 = [np.bincount(vox, xyz[a] * xyz[b], n_vox) for a, b in OUTER_INDEX]
+    lab_of_voxel = np.full(n_vox, -1, np.int64)
+    lab_of_voxel[vox] = labels[at]
+    own = surface_of_voxel[sv]
+    c = np.zeros(len(sv))
+    t1 = [np.zeros(len(sv)) for _ in range(3)]
+    t2 = [np.zeros(len(sv)) for _ in range(6)]
+    for j in index.neighbours_many(sv, _WINDOW, grid.keys):
+        ok = j >= 0
+        ok[ok] = lab_of_voxel[j[ok]] == own[ok]
+        jj = np.where(ok, j, 0)
+        w = np.where(ok, 1.0, 0.0)
+        c += w * count[jj]
+        for a in range(3):
+            t1[a] += w * s1[a][jj]
+        for k in range(6):
+            t2[k] += w * s2[k][jj]
+    fit = c >= 3
+    mean = [t1[a][fit] / c[fit] for a in range(3)]
+    entries = [t2[k][fit] / c[fit] - mean[a] * mean[b] for k, (a, b) in enumerate(OUTER_INDEX)]
+    _, normal = sym3_eigen_entries(*entries)
+    normal = np.where(normal[:, 2:3] < 0, -normal, normal)
+    level = normal[:, 2] > 0.5  # a degenerate window keeps its voxel's own plane
+    to = sv[fit][level]
+    planes.mean[to] = np.stack(mean, axis=1)[level]
+    planes.normal[to] = normal[level]
