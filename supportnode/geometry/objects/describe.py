@@ -7,6 +7,8 @@ supported_by.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from supportnode.geometry.memo import Memo
@@ -29,7 +31,7 @@ def _describe(seg: Segmentation, memo: Memo | None = None) -> list[Cluster]:
         hulls = [_hulls(p, lo[cid], hi[cid]) for cid, p in enumerate(groups)]  # per cluster
     else:  # lo, hi are p's own bounds: a pure function of p
         hulls = [
-            memo.get("hull", p, lambda p=p, cid=cid: _hulls(p, lo[cid], hi[cid]))
+            memo.get("hull", p, functools.partial(_hulls, p, lo[cid], hi[cid]))
             for cid, p in enumerate(groups)
         ]  # per cluster
     # The hulls, never the raw points: the edge search is quadratic in the vertices.

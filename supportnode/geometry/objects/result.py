@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    pass
+    from supportnode.geometry.objects.support_lookup import _SupportLookup
 
 
 @dataclass
@@ -100,6 +100,7 @@ class Components:
     _candidates: np.ndarray = field(repr=False)  # (M,) int64 their rows in the input
     _labels: np.ndarray = field(repr=False)  # (M,) int64 component of each candidate, -1: none
     _supports: np.ndarray = field(repr=False)  # (C,) int64 surface of each component by label
-    _lookups: list = field(repr=False)
+    # The surfaces' footprint lookups, plain and dilated (see support_lookup._lookups).
+    _lookups: tuple[list[_SupportLookup], list[_SupportLookup]] = field(repr=False)
     _n_points: int = 0
     _stats: dict = field(default_factory=dict, repr=False)

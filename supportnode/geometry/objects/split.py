@@ -12,6 +12,8 @@ Points cp (M, 3) float64 metres, z up; labels (M,) int64, -1 = none.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from supportnode.geometry.memo import Memo
@@ -64,9 +66,7 @@ def _split_touching(
             parts, n_parts, how = memo.get(
                 "split",
                 np.take(cp, idx, axis=0),
-                lambda idx=idx, extent=extent: _split_one(
-                    cp, idx, all_xy, extent, params, cell, radius
-                ),
+                functools.partial(_split_one, cp, idx, all_xy, extent, params, cell, radius),
             )
         if how is not None:
             stats[how] += 1

@@ -90,9 +90,9 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     # Within two cells: a box's edge cells hold its sides' points, lower than its top.
     near_free = ndimage.binary_dilation(~solid, structure=np.ones((5, 5), dtype=bool))[1:-1, 1:-1]
     for k in big:  # two plateaus
-        mine = np.zeros(h * w, dtype=bool)
-        mine[cells[plateau == k]] = True
-        mine = mine.reshape(h, w)
+        mine_flat = np.zeros(h * w, dtype=bool)
+        mine_flat[cells[plateau == k]] = True
+        mine = mine_flat.reshape(h, w)
         rim = mine & ~ndimage.binary_erosion(mine, np.ones((3, 3), dtype=bool), border_value=0)
         if (rim & near_free).sum() < _STEP_RIM_FREE * rim.sum():
             return None, True
