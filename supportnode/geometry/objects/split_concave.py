@@ -46,6 +46,42 @@ def _split_concave(p: np.ndarray, voxel: float, tol: float, min_points: int) -> 
     if len(p) < 2 * max(min_points, 1):
         return None
     q = p - _col(np.add, p) / len(p)  # centred: moments without cancellation; centroid 0
+    voxels = _voxel_normals(q, voxel)
+    if voxels is None:
+        return None
+    vkeys, strides, inv, cnt, cen, normal = voxels
+    comp = _crease_components(vkeys, strides, cnt >= _CONCAVE_MIN_POINTS, cen, normal, tol)
+    if comp is None:
+        return None
+    pcomp = comp[inv]
+    ok = pcomp >= 0
+    n_comp = int(comp.max()) + 1
+    size = np.bincount(pcomp[ok], minlength=n_comp)
+    cand = np.flatnonzero(size >= max(min_points, _CONCAVE_PART_FRACTION * len(p)))
+    if len(cand) < 2:
+        return None
+    parts = _standing_parts(q, pcomp, cand, voxel)
+    if len(parts) < 2:
+        return None
+    seed = np.concatenate(parts)
+    seed_part = np.repeat(np.arange(len(parts)), [len(s) for s in parts])
+    _, near = cKDTree(q[seed, :2]).query(q[:, :2], k=1)
+    part = seed_part[near]
+    counts = np.bincount(part, minlength=len(parts))
+    if counts.min() < min_points:
+        return None
+    rank = np.empty(len(counts), dtype=np.int64)
+    rank[np.argsort(-counts, kind="stable")] = np.arange(len(counts))
+    return rank[part]
+
+
+def _voxel_normals(
+    q: np.ndarray, voxel: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The voxels of edge voxel (m) of the centred points q (P, 3): their sorted keys (V,)
+    int64, the key strides (3,), the voxel of each point (P,), point counts (V,) float64,
+    centroids (V, 3) and unit normals (V, 3) (smallest eigenvector of the points' scatter,
+    turned away from the origin, the cluster's centroid); None for fewer than 3 voxels."""
     ijk = [np.floor((c - c.min()) / voxel).astype(np.int64) + 1 for c in q.T]
     dims = np.array([c.max() + 2 for c in ijk], dtype=np.int64)
     strides = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
@@ -65,7 +101,20 @@ def _split_concave(p: np.ndarray, voxel: float, tol: float, min_points: int) -> 
     _, normal = sym3_eigen(cov)
     flip = (normal * cen).sum(axis=1) < 0  # outward: away from the centroid (the origin)
     normal[flip] *= -1.0
-    good = cnt >= _CONCAVE_MIN_POINTS
+    return vkeys, strides, inv, cnt, cen, normal
+
+
+def _crease_components(
+    vkeys: np.ndarray,
+    strides: np.ndarray,
+    good: np.ndarray,
+    cen: np.ndarray,
+    normal: np.ndarray,
+    tol: float,
+) -> np.ndarray | None:
+    """(V,) component of each voxel (see _voxel_normals) once the voxels of concave links
+    between good (V,) bool voxels are removed, -1 for those; None when no link is concave."""
+    nv = len(vkeys)
     rows, cols = [], []
     for off in FORWARD_26 @ strides:  # 13 vectorised look-ups, not a loop over voxels
         pos = np.minimum(np.searchsorted(vkeys, vkeys + off), nv - 1)
@@ -85,13 +134,15 @@ def _split_concave(p: np.ndarray, voxel: float, tol: float, min_points: int) -> 
     graph = coo_matrix((np.ones(int(keep.sum()), dtype=np.int8), (r[keep], c[keep])), (nv, nv))
     _, comp = connected_components(graph.tocsr(), directed=False)
     comp[crease] = -1
-    pcomp = comp[inv]
-    ok = pcomp >= 0
-    n_comp = int(comp.max()) + 1
-    size = np.bincount(pcomp[ok], minlength=n_comp)
-    cand = np.flatnonzero(size >= max(min_points, _CONCAVE_PART_FRACTION * len(p)))
-    if len(cand) < 2:
-        return None
+    return comp
+
+
+def _standing_parts(
+    q: np.ndarray, pcomp: np.ndarray, cand: np.ndarray, voxel: float
+) -> list[np.ndarray]:
+    """The point rows (P_k,) of each candidate component cand of pcomp (P,) (the component of
+    each point of q (P, 3)) that spans _CONCAVE_PART_VOXELS voxels in x and y and reaches
+    within _STEP_STAND of the cluster's bottom."""
     bottom = np.percentile(q[:, 2], 1.0)
     parts = []
     for k in cand:  # a few large components
@@ -102,15 +153,4 @@ def _split_concave(p: np.ndarray, voxel: float, tol: float, min_points: int) -> 
         if np.percentile(q[sel, 2], 2.0) - bottom > _STEP_STAND:
             continue  # stands on another part, not on the surface
         parts.append(sel)
-    if len(parts) < 2:
-        return None
-    seed = np.concatenate(parts)
-    seed_part = np.repeat(np.arange(len(parts)), [len(s) for s in parts])
-    _, near = cKDTree(q[seed, :2]).query(q[:, :2], k=1)
-    part = seed_part[near]
-    counts = np.bincount(part, minlength=len(parts))
-    if counts.min() < min_points:
-        return None
-    rank = np.empty(len(counts), dtype=np.int64)
-    rank[np.argsort(-counts, kind="stable")] = np.arange(len(counts))
-    return rank[part]
+    return parts

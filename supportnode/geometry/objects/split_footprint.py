@@ -74,7 +74,8 @@ def _split_footprint(
     neck is never thin in absolute terms, only clearly thinner than the discs themselves.
     Parts must each cover _SPLIT_MIN_FRACTION of the footprint and hold min_points points.
     Every footprint cell then goes to the nearest surviving part (the dilation half of the
-    opening, without losing the cells an opening would shave off).
+    opening, without losing the cells an opening would shave off). The steps are helpers; the
+    cheap early exits and the level loop stay here, in the order they save work.
     """
     lo = _col(np.minimum, xy)
     shape = np.floor((_col(np.maximum, xy) - lo) / cell).astype(np.int64) + 3  # = ij.max + 2
@@ -84,14 +85,7 @@ def _split_footprint(
     # would run numpy's inner loop over 2 elements.
     ux = (xy[:, 0] - lo[0]) / cell
     uy = (xy[:, 1] - lo[1]) / cell
-    occ = np.zeros(tuple(shape), dtype=bool)
-    # +1: empty border; truncation = floor (>= 0). One flat index, not a 2-D fancy index.
-    occ.reshape(-1)[(ux.astype(np.int64) + 1) * int(shape[1]) + uy.astype(np.int64) + 1] = True
-    # Closing bridges the gaps between sample points (a 2 cm lattice on the 1 cm raster).
-    # Filling holes makes a side-scanned barrel a disc, not a ring that erosion would wipe out,
-    # and removes the speckle of sparse, noisy sampling that would fake saddles. (It also fills
-    # the small gap between three barrels touching in a triangle, which then stay one object.)
-    occ = _fill_holes(occ | _close3(occ), max_cells=int(_SPLIT_MAX_HOLE / cell**2))
+    occ = _footprint_raster(ux, uy, shape, cell)
     # The taxicab distance to the edge bounds the Euclidean one from above and costs a tenth:
     # a footprint with no cell deep enough for a part (a ring of walls) stops here.
     if not _taxicab_deep(occ, cell, 1.5 * radius):
@@ -108,12 +102,7 @@ def _split_footprint(
     # on the whole raster of a room-sized cluster of walls.
     box = _true_box(depth > 0.5)
     depth_box = depth[box]
-    # Ascending levels, the shallowest neck is cut first; at most ~40 levels for big footprints.
-    levels = []
-    for t in np.arange(0.5, top, max(0.5, top / 40.0)):
-        if t * cell >= radius and t > _SPLIT_NECK_RATIO * top:
-            break  # no part can be deep enough for this level or any higher one (see below)
-        levels.append(t)
+    levels = _levels(top, cell, radius)
     first, probed = _first_level(depth_box, levels, cell, radius)
     for k in range(first, len(levels)):
         t = levels[k]
@@ -138,37 +127,7 @@ def _split_footprint(
         big = _big_parts(occ, n_cells, comp, deep)
         if big.sum() < 2:
             continue
-        # Each point goes to the part of least power distance |p - c|^2 - rho^2, with c, rho
-        # the centre and depth of the part's deepest cells (its inscribed disc): for two
-        # touching discs the cut is then exactly the tangent at the contact, wherever the
-        # raster put the neck. (A cut one cell off moves the many wall points crowding there.)
-        keep = np.flatnonzero(big) + 1
-        rho = peak[keep - 1]
-        ci, cj = np.nonzero(inside)
-        ci += box[0].start  # raster indices, as np.nonzero(comp > 0) gives them
-        cj += box[1].start
-        lab_c = comp[ci, cj]
-        top_cells = depth[ci, cj] >= rho[np.searchsorted(keep, lab_c).clip(0, len(keep) - 1)] - 1
-        top_cells &= np.isin(lab_c, keep)
-        k_of = np.searchsorted(keep, lab_c[top_cells])
-        cnt = np.bincount(k_of, minlength=len(keep))
-        centre = np.stack(
-            [
-                np.bincount(k_of, ci[top_cells], minlength=len(keep)) / cnt,
-                np.bincount(k_of, cj[top_cells], minlength=len(keep)) / cnt,
-            ],
-            axis=1,
-        )
-        vx, vy = ux + 0.5, uy + 0.5  # cell i's centre is at coordinate i
-        # (K, P), row by row: the same sums dx^2 + dy^2 as summing a (K, P, 2) array over its
-        # last axis, without that array and its strided reduction.
-        dist = np.stack(
-            [
-                (vx - ck[0]) ** 2 + (vy - ck[1]) ** 2 - rk2
-                for ck, rk2 in zip(centre, rho**2, strict=True)
-            ]
-        )
-        part = np.argmin(dist, axis=0)
+        part = _power_parts(ux, uy, depth, comp, inside, box, peak, big)
         counts = np.bincount(part, minlength=int(big.sum()))
         if (counts < min_points).any():
             return None
@@ -177,6 +136,80 @@ def _split_footprint(
         rank[np.argsort(-counts, kind="stable")] = np.arange(len(counts))
         return rank[part]
     return None
+
+
+def _footprint_raster(ux: np.ndarray, uy: np.ndarray, shape: np.ndarray, cell: float) -> np.ndarray:
+    """(H, W) = shape bool footprint of the points at raster coordinates ux, uy (P,) (in cells
+    from the lower corner; an empty border is added), closed and its holes of up to
+    _SPLIT_MAX_HOLE m^2 filled; cell in metres."""
+    occ = np.zeros(tuple(shape), dtype=bool)
+    # +1: empty border; truncation = floor (>= 0). One flat index, not a 2-D fancy index.
+    occ.reshape(-1)[(ux.astype(np.int64) + 1) * int(shape[1]) + uy.astype(np.int64) + 1] = True
+    # Closing bridges the gaps between sample points (a 2 cm lattice on the 1 cm raster).
+    # Filling holes makes a side-scanned barrel a disc, not a ring that erosion would wipe out,
+    # and removes the speckle of sparse, noisy sampling that would fake saddles. (It also fills
+    # the small gap between three barrels touching in a triangle, which then stay one object.)
+    return _fill_holes(occ | _close3(occ), max_cells=int(_SPLIT_MAX_HOLE / cell**2))
+
+
+def _levels(top: float, cell: float, radius: float) -> list[float]:
+    """The ascending depth levels (cells) at which _split_footprint cuts a footprint whose
+    deepest cell is top cells deep: the shallowest neck is cut first; at most ~40 levels for
+    big footprints."""
+    levels = []
+    for t in np.arange(0.5, top, max(0.5, top / 40.0)):
+        if t * cell >= radius and t > _SPLIT_NECK_RATIO * top:
+            break  # no part can be deep enough for this level or any higher (see `deep` there)
+        levels.append(t)
+    return levels
+
+
+def _power_parts(
+    ux: np.ndarray,
+    uy: np.ndarray,
+    depth: np.ndarray,
+    comp: np.ndarray,
+    inside: np.ndarray,
+    box: tuple[slice, slice],
+    peak: np.ndarray,
+    big: np.ndarray,
+) -> np.ndarray:
+    """(P,) index of the part of each point (raster coordinates ux, uy (P,)) among the big (n,)
+    bool parts of comp (H, W) (labels 1..n; inside: comp > 0 within box; peak (n,): each
+    part's greatest depth of depth (H, W), cells).
+
+    Each point goes to the part of least power distance |p - c|^2 - rho^2, with c, rho the
+    centre and depth of the part's deepest cells (its inscribed disc): for two touching discs
+    the cut is then exactly the tangent at the contact, wherever the raster put the neck. (A
+    cut one cell off moves the many wall points crowding there.)
+    """
+    keep = np.flatnonzero(big) + 1
+    rho = peak[keep - 1]
+    ci, cj = np.nonzero(inside)
+    ci += box[0].start  # raster indices, as np.nonzero(comp > 0) gives them
+    cj += box[1].start
+    lab_c = comp[ci, cj]
+    top_cells = depth[ci, cj] >= rho[np.searchsorted(keep, lab_c).clip(0, len(keep) - 1)] - 1
+    top_cells &= np.isin(lab_c, keep)
+    k_of = np.searchsorted(keep, lab_c[top_cells])
+    cnt = np.bincount(k_of, minlength=len(keep))
+    centre = np.stack(
+        [
+            np.bincount(k_of, ci[top_cells], minlength=len(keep)) / cnt,
+            np.bincount(k_of, cj[top_cells], minlength=len(keep)) / cnt,
+        ],
+        axis=1,
+    )
+    vx, vy = ux + 0.5, uy + 0.5  # cell i's centre is at coordinate i
+    # (K, P), row by row: the same sums dx^2 + dy^2 as summing a (K, P, 2) array over its
+    # last axis, without that array and its strided reduction.
+    dist = np.stack(
+        [
+            (vx - ck[0]) ** 2 + (vy - ck[1]) ** 2 - rk2
+            for ck, rk2 in zip(centre, rho**2, strict=True)
+        ]
+    )
+    return np.argmin(dist, axis=0)
 
 
 def _first_level(

@@ -63,6 +63,38 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     solid = _fill_holes(_close3(occupied))
     if len(cells) < _STEP_DENSE * solid.sum():
         return None, False
+    plateau = _plateaus(grid, cells)
+    size = np.bincount(plateau)
+    big = np.flatnonzero(size >= _STEP_PART_FRACTION * len(cells))
+    if len(big) != 2 or size[big].sum() < _STEP_COVER * len(cells):
+        return None, True
+    tops = [top[cells[plateau == k]] for k in big]
+    if abs(float(np.median(tops[0]) - np.median(tops[1]))) < _STEP_MIN:
+        return None, True
+    if max(float(t.std()) for t in tops) > _STEP_FLAT:
+        return None, True
+    # Each level must stand beside the other, not on it: most of its rim borders free space
+    # (a box beside a box: three of four sides; a stacked box: none).
+    if not _beside_free(solid, cells, plateau, big):
+        return None, True
+    part = _by_level(p, lo, cell, np.array([np.median(t) for t in tops]))
+    if part is None:
+        return None, True
+    counts = np.bincount(part, minlength=2)
+    if counts.min() < min_points:
+        return None, True
+    bottom = np.percentile(p[:, 2], 1.0)
+    for n in range(2):
+        if np.percentile(p[part == n, 2], 2.0) - bottom > _STEP_STAND:
+            return None, True  # one level stands on the other, not on the surface
+    return (part if counts[0] >= counts[1] else 1 - part), True  # part 0 the larger
+
+
+def _plateaus(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """(C,) int plateau of each occupied cell: the 8-connected components of the cells of the
+    top-height raster grid (H, W) m (-inf when empty) at flat indices cells (C,) int64, two
+    neighbours linked when their tops differ by at most _STEP_LINK."""
+    h, w = grid.shape
     vid = np.full((h, w), -1, dtype=np.int64)
     vid.flat[cells] = np.arange(len(cells))
     rows, cols = [], []
@@ -76,17 +108,16 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     r, c = np.concatenate(rows), np.concatenate(cols)
     graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(len(cells),) * 2)
     _, plateau = connected_components(graph.tocsr(), directed=False)
-    size = np.bincount(plateau)
-    big = np.flatnonzero(size >= _STEP_PART_FRACTION * len(cells))
-    if len(big) != 2 or size[big].sum() < _STEP_COVER * len(cells):
-        return None, True
-    tops = [top[cells[plateau == k]] for k in big]
-    if abs(float(np.median(tops[0]) - np.median(tops[1]))) < _STEP_MIN:
-        return None, True
-    if max(float(t.std()) for t in tops) > _STEP_FLAT:
-        return None, True
-    # Each level must stand beside the other, not on it: most of its rim borders free space
-    # (a box beside a box: three of four sides; a stacked box: none).
+    return plateau
+
+
+def _beside_free(
+    solid: np.ndarray, cells: np.ndarray, plateau: np.ndarray, big: np.ndarray
+) -> bool:
+    """Whether each of the plateaus big (of plateau (C,), the plateau of each occupied cell at
+    flat indices cells of the (H, W) raster) borders free space along _STEP_RIM_FREE of its
+    rim. solid: (H + 2, W + 2) bool, the closed, hole-filled footprint with an empty border."""
+    h, w = solid.shape[0] - 2, solid.shape[1] - 2
     # Within two cells: a box's edge cells hold its sides' points, lower than its top.
     near_free = ndimage.binary_dilation(~solid, structure=np.ones((5, 5), dtype=bool))[1:-1, 1:-1]
     for k in big:  # two plateaus
@@ -95,10 +126,17 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
         mine = mine_flat.reshape(h, w)
         rim = mine & ~ndimage.binary_erosion(mine, np.ones((3, 3), dtype=bool), border_value=0)
         if (rim & near_free).sum() < _STEP_RIM_FREE * rim.sum():
-            return None, True
-    # Points go by a raster three times finer, whose cells take the plateau their top height
-    # matches (the coarse cells at the step hold both levels), else the nearest such cell.
-    level = np.array([np.median(t) for t in tops])
+            return False
+    return True
+
+
+def _by_level(p: np.ndarray, lo: np.ndarray, cell: float, level: np.ndarray) -> np.ndarray | None:
+    """(P,) int64 level 0 or 1 of each point of p (P, 3), by the two levels' heights level (2,)
+    m; None when no cell matches either. lo: (2,) the footprint's lower corner, cell: metres.
+
+    Points go by a raster three times finer, whose cells take the plateau their top height
+    matches (the coarse cells at the step hold both levels), else the nearest such cell.
+    """
     fine = ((p[:, :2] - lo) / (cell / 3.0)).astype(np.int64)
     fh, fw = (int(v) + 1 for v in _col(np.maximum, fine))
     fkey = fine[:, 0] * fw + fine[:, 1]
@@ -108,14 +146,6 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     mark = np.where(gap.min(axis=1) <= _STEP_LINK, np.argmin(gap, axis=1) + 1, 0)
     mark = mark.reshape(fh, fw)
     if not mark.any():
-        return None, True
+        return None
     _, (ni, nj) = ndimage.distance_transform_edt(mark == 0, return_indices=True)
-    part = mark[ni, nj].ravel()[fkey] - 1
-    counts = np.bincount(part, minlength=2)
-    if counts.min() < min_points:
-        return None, True
-    bottom = np.percentile(p[:, 2], 1.0)
-    for n in range(2):
-        if np.percentile(p[part == n, 2], 2.0) - bottom > _STEP_STAND:
-            return None, True  # one level stands on the other, not on the surface
-    return (part if counts[0] >= counts[1] else 1 - part), True  # part 0 the larger
+    return mark[ni, nj].ravel()[fkey] - 1
