@@ -400,25 +400,25 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     """The speed-ups of the voxel method give the same answer as the straightforward code."""
     import scipy.ndimage as ndi
 
-    import supportnode.geometry.objects._core as mod
+    from supportnode.geometry.objects import arrays, clusters, hull, raster, support_lookup
 
     rng = np.random.default_rng(7)
     for _ in range(20):  # hole filling by one labelling == binary_fill_holes
         mask = rng.random((rng.integers(3, 40), rng.integers(3, 40))) < rng.uniform(0.3, 0.8)
-        np.testing.assert_array_equal(mod._fill_holes(mask), ndi.binary_fill_holes(mask))
+        np.testing.assert_array_equal(raster._fill_holes(mask), ndi.binary_fill_holes(mask))
     lab = rng.integers(-1, 300, 5000)
-    np.testing.assert_array_equal(mod._group_by_label(lab), np.argsort(lab, kind="stable"))
+    np.testing.assert_array_equal(arrays._group_by_label(lab), np.argsort(lab, kind="stable"))
 
     # Points on vertical lines: dropping the inner ones keeps the hull and its volume.
     xy = rng.uniform(0, 1, (300, 2))
     p = np.c_[np.repeat(xy, 10, axis=0), rng.uniform(0, 1, 3000)]
-    keep = mod._column_ends(p)
+    keep = hull._column_ends(p)
     assert keep.sum() <= 600
     lo, hi = p.min(axis=0), p.max(axis=0)
-    monkeypatch.setattr(mod, "_COLUMN_DEDUPE_MIN", 10**9)
-    ref_fp, ref_vol = mod._hulls(p, lo, hi)
-    monkeypatch.setattr(mod, "_COLUMN_DEDUPE_MIN", 1)
-    fp, vol = mod._hulls(p, lo, hi)
+    monkeypatch.setattr(hull, "_COLUMN_DEDUPE_MIN", 10**9)
+    ref_fp, ref_vol = hull._hulls(p, lo, hi)
+    monkeypatch.setattr(hull, "_COLUMN_DEDUPE_MIN", 1)
+    fp, vol = hull._hulls(p, lo, hi)
     assert vol == pytest.approx(ref_vol, rel=1e-12)
     assert sorted(map(tuple, fp)) == sorted(map(tuple, ref_fp))
 
@@ -429,14 +429,16 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
         make_surface(2, 0.8, 0.0, 0.6, 0.1, 0.5),
     ]
     cp = np.c_[rng.uniform(-1.2, 1.2, (20000, 2)), rng.uniform(-0.1, 1.5, 20000)]
-    fast = mod._support_below(cp, surfaces, 0.05)
+    fast = support_lookup._support_below(cp, surfaces, 0.05)
     with monkeypatch.context() as m:
-        m.setattr(mod._SupportTable, "build", classmethod(lambda cls, lookups, tol: None))
-        np.testing.assert_array_equal(fast, mod._support_below(cp, surfaces, 0.05))
-    dense = mod._cluster_voxel(cp * 0.3, 0.03, {}, fast)
-    monkeypatch.setattr(mod, "_DENSE_MIN_CELLS", 0)
-    monkeypatch.setattr(mod, "_DENSE_CELLS_PER_POINT", 0)
-    np.testing.assert_array_equal(dense, mod._cluster_voxel(cp * 0.3, 0.03, {}, fast))
+        m.setattr(
+            support_lookup._SupportTable, "build", classmethod(lambda cls, lookups, tol: None)
+        )
+        np.testing.assert_array_equal(fast, support_lookup._support_below(cp, surfaces, 0.05))
+    dense = clusters._cluster_voxel(cp * 0.3, 0.03, {}, fast)
+    monkeypatch.setattr(clusters, "_DENSE_MIN_CELLS", 0)
+    monkeypatch.setattr(clusters, "_DENSE_CELLS_PER_POINT", 0)
+    np.testing.assert_array_equal(dense, clusters._cluster_voxel(cp * 0.3, 0.03, {}, fast))
 
 
 def barrel_triangle(r: float = 0.06, step: float = 0.005) -> np.ndarray:
@@ -541,7 +543,8 @@ def test_split_objects_finds_again_only_the_surfaces_of_split_clusters():
     (a function of the same points): the same surfaces as looking every cluster up anew."""
     from conftest import REPO
 
-    from supportnode.geometry.objects import _core as O
+    from supportnode.geometry.objects import cluster_objects, split_objects
+    from supportnode.geometry.objects.clusters import _order
     from supportnode.io.clouds import read_cloud
     from supportnode.params import DetectParams
 
@@ -549,11 +552,11 @@ def test_split_objects_finds_again_only_the_surfaces_of_split_clusters():
     for name in ("sloped", "shelf", "table_chairs"):
         pts = np.asarray(read_cloud(REPO / "sim_scans" / f"{name}_sampled.ply").points, float)
         surf = detect_surfaces(pts, params.surfaces)
-        comp = O.cluster_objects(pts, surf, params.objects)
-        seg = O.split_objects(comp, params.objects)
+        comp = cluster_objects(pts, surf, params.objects)
+        seg = split_objects(comp, params.objects)
         # Labels of the candidates, in the final numbering: _order again with no known surfaces.
         cand = comp._candidates
-        fresh = O._order(
+        fresh = _order(
             comp._points, seg.labels[cand].astype(np.int64), comp._lookups[1], params.objects
         )
         np.testing.assert_array_equal(seg.surface_ids, fresh.surface_ids)

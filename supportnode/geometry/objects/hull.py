@@ -1,0 +1,181 @@
+"""Shape of one cluster's points: x, y footprint (convex hull, counter-clockwise), convex-hull
+volume and the yaw-only minimum-area box of the footprint.
+
+Points p (P, 3) float64 metres, z up; footprints (K, 2) float64; volumes m^3; yaw radians in
+(-pi/2, pi/2], the direction of the box's length axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+# Clusters of at least this many points drop the inner points of vertical lines before the
+# hull (see _column_ends); below, the grouping costs more than Qhull saves.
+_COLUMN_DEDUPE_MIN = 1000
+# Footprints of up to this many vertices get their oriented boxes in one batch (see
+# _oriented_rects), padded to the largest: at most 64 x 64 directions x vertices per cluster.
+_RECT_BATCH_MAX = 64
+# Odd 64-bit multipliers (golden ratio and a splitmix64 constant) hashing x, y bit patterns.
+_HASH_X = np.uint64(0x9E3779B97F4A7C15)
+_HASH_Y = np.uint64(0xBF58476D1CE4E5B9)
+
+
+def _hulls(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, float]:
+    """x, y footprint (K, 2) (see _hull_2d) and convex-hull volume (m^3) of p (P, 3).
+
+    lo, hi: (3,) bounding box of p. The footprint is the 2-D hull of the 3-D hull's vertices
+    only: projecting a convex hull gives the hull of the projected vertices, and the 3-D hull
+    has a few dozen vertices where a wall cluster has 80k points.
+    """
+    volume, verts = 0.0, None
+    # A set flat along an axis has no volume; Qhull would raise (slowly) on it.
+    if len(p) >= 4 and (hi > lo).all():
+        q = np.compress(_column_ends(p), p, axis=0) if len(p) >= _COLUMN_DEDUPE_MIN else p
+        try:
+            hull = ConvexHull(q)
+            # hull.vertices is np.unique(hull.simplices): a mask keeps the same rows in the
+            # same (input) order without the sort.
+            used = np.zeros(len(q), dtype=bool)
+            used[hull.simplices] = True
+            volume, verts = float(hull.volume), np.compress(used, q, axis=0)
+        except (QhullError, ValueError):
+            pass
+    if not (hi[:2] > lo[:2]).all():
+        # All on one line x = c or y = c (a wall strip seen edge-on): what _hull_2d returns
+        # for collinear sets, its two ends in sorted order (or the one point), without the
+        # failed Qhull call and the sort of all points.
+        ends = np.array([lo[:2], hi[:2]])
+        return (ends[:1] if (ends[0] == ends[1]).all() else ends), volume
+    return _hull_2d(p[:, :2] if verts is None else verts[:, :2]), volume
+
+
+def _oriented_rect(xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+    """Yaw-only box around xy (K, 2): (centre (2,), length, width, yaw of the length axis).
+
+    For a hull polygon, the minimum-area rectangle (one side is flush with a hull edge, so only
+    the K edge directions are tried); PCA of the spread would be arbitrary for a square footprint
+    and too wide for a cylinder next to a box. Degenerate sets use the principal axis.
+    """
+    if len(xy) >= 3:
+        edges = np.concatenate([xy[1:], xy[:1]]) - xy  # np.roll(xy, -1, axis=0) - xy
+        angles = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
+    else:
+        d = xy - xy.mean(axis=0)
+        _, vec = np.linalg.eigh(d.T @ d)
+        angles = np.array([np.mod(np.arctan2(vec[1, 1], vec[0, 1]), np.pi / 2)])
+    cos, sin = np.cos(angles), np.sin(angles)
+    u = xy[:, 0, None] * cos + xy[:, 1, None] * sin  # (K, A): coordinate along each direction
+    v = -xy[:, 0, None] * sin + xy[:, 1, None] * cos
+    ext_u = u.max(axis=0) - u.min(axis=0)
+    ext_v = v.max(axis=0) - v.min(axis=0)
+    best = int(np.argmin(ext_u * ext_v + 1e-12 * angles))  # ties: the smallest angle
+    a, c, s = angles[best], cos[best], sin[best]
+    mu = (u[:, best].max() + u[:, best].min()) / 2
+    mv = (v[:, best].max() + v[:, best].min()) / 2
+    centre = np.array([mu * c - mv * s, mu * s + mv * c])
+    length, width = float(ext_u[best]), float(ext_v[best])
+    if width > length:
+        length, width, a = width, length, a + np.pi / 2
+    if a > np.pi / 2:
+        a -= np.pi  # yaw in (-pi/2, pi/2]
+    return centre, length, width, float(a)
+
+
+def _oriented_rects(polys: list[np.ndarray]) -> list[tuple[np.ndarray, float, float, float]]:
+    """:func:`_oriented_rect` of each polygon of polys (K_i, 2), the same values.
+
+    Polygons of 3 to _RECT_BATCH_MAX vertices go in one batch: each is padded to the largest
+    K with copies of its last vertex (which change no extent) and its padded directions are
+    never chosen; every value comes from the same element-wise operations as one at a time,
+    without some 20 numpy calls per cluster. Others (degenerate, or so large that padding all
+    to them would cost more) are done one by one.
+    """
+    out: list = [None] * len(polys)
+    k = np.array([len(xy) for xy in polys], dtype=np.int64)
+    batch = np.flatnonzero((k >= 3) & (k <= _RECT_BATCH_MAX))
+    for i in np.flatnonzero((k < 3) | (k > _RECT_BATCH_MAX)):
+        out[i] = _oriented_rect(polys[i])
+    if len(batch) == 0:
+        return out
+    kb = k[batch]
+    starts = np.cumsum(kb) - kb
+    xy = np.concatenate([polys[i] for i in batch])  # (N, 2)
+    t = np.arange(int(kb.max()))
+    # Row t of polygon j, or its last vertex past the end: (B, T) flat indices into xy.
+    idx = starts[:, None] + np.minimum(t[None, :], kb[:, None] - 1)
+    nxt = np.arange(len(xy)) + 1
+    nxt[starts + kb - 1] = starts  # each polygon's last vertex closes onto its first
+    edges = np.take(xy, nxt, axis=0) - xy  # (N, 2), as np.roll(xy, -1, axis=0) - xy
+    flat = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
+    angles, cos, sin = flat[idx], np.cos(flat)[idx], np.sin(flat)[idx]  # (B, T)
+    x, y = xy[idx, 0][:, :, None], xy[idx, 1][:, :, None]  # (B, T, 1): vertex along axis 1
+    u = x * cos[:, None, :] + y * sin[:, None, :]  # (B, T, A)
+    v = -x * sin[:, None, :] + y * cos[:, None, :]
+    u_max, u_min = u.max(axis=1), u.min(axis=1)
+    v_max, v_min = v.max(axis=1), v.min(axis=1)
+    ext_u, ext_v = u_max - u_min, v_max - v_min  # (B, A)
+    score = ext_u * ext_v + 1e-12 * angles
+    score[t[None, :] >= kb[:, None]] = np.inf  # padded directions
+    best = np.argmin(score, axis=1)  # ties: the smallest angle, as _oriented_rect
+    rb = np.arange(len(batch))
+    a, c, s = angles[rb, best], cos[rb, best], sin[rb, best]
+    mu = (u_max[rb, best] + u_min[rb, best]) / 2
+    mv = (v_max[rb, best] + v_min[rb, best]) / 2
+    centre = np.stack([mu * c - mv * s, mu * s + mv * c], axis=1)
+    length, width = ext_u[rb, best], ext_v[rb, best]
+    swap = width > length
+    length, width = np.where(swap, width, length), np.where(swap, length, width)
+    a = np.where(swap, a + np.pi / 2, a)
+    a = np.where(a > np.pi / 2, a - np.pi, a)  # yaw in (-pi/2, pi/2]
+    for j, i in enumerate(batch.tolist()):
+        out[i] = (centre[j], float(length[j]), float(width[j]), float(a[j]))
+    return out
+
+
+def _column_ends(p: np.ndarray) -> np.ndarray:
+    """(P,) bool: the points of p (P, 3) that may be hull vertices, as far as columns tell.
+
+    A point strictly between two points of exactly the same x, y lies on the vertical segment
+    joining them and is never a vertex of the convex hull, so dropping it changes neither the
+    hull nor its volume (up to round-off in the facet sums). Scanners put many points on one
+    vertical line (the beams of one azimuth on a wall: 80k points on 2.7k lines in the
+    simulator's kitchen); for others nothing is dropped. The points are grouped by a 32-bit
+    hash of their x, y bits with two 16-bit radix passes (a comparison sort of 80k keys takes
+    10x longer); a hash collision only splits a line's points into runs and keeps more.
+    """
+    bits = np.ascontiguousarray(p).view(np.uint64)  # (P, 3): x, y columns read in place
+    x, y = bits[:, 0], bits[:, 1]
+    h = (((x * _HASH_X) ^ (y * _HASH_Y)) >> np.uint64(32)).astype(np.uint32)
+    order = np.argsort(h.astype(np.uint16), kind="stable")  # low 16 bits, then high 16
+    order = order[np.argsort((h >> np.uint32(16)).astype(np.uint16)[order], kind="stable")]
+    xs, ys = np.take(x, order), np.take(y, order)
+    new_line = np.empty(len(p), dtype=bool)
+    new_line[0] = True
+    np.not_equal(xs[1:], xs[:-1], out=new_line[1:])
+    new_line[1:] |= ys[1:] != ys[:-1]
+    first = np.flatnonzero(new_line)
+    run = np.diff(first, append=len(p))
+    z = np.take(p[:, 2], order)
+    # Each line's extremes repeated over its run: cheaper than a cumsum of line ids and gathers.
+    inner = (z > np.repeat(np.minimum.reduceat(z, first), run)) & (
+        z < np.repeat(np.maximum.reduceat(z, first), run)
+    )
+    keep = np.empty(len(p), dtype=bool)
+    keep[order] = ~inner
+    return keep
+
+
+def _hull_2d(xy: np.ndarray) -> np.ndarray:
+    """Convex hull (K, 2) of xy, counter-clockwise; the distinct points for degenerate sets."""
+    try:
+        hull = ConvexHull(xy)
+    except (QhullError, ValueError):
+        uniq = np.unique(xy, axis=0)
+        if len(uniq) <= 2:
+            return uniq
+        # Collinear: the two extreme points along the line.
+        d = uniq - uniq[0]
+        t = d @ (d[np.argmax((d**2).sum(axis=1))])
+        return uniq[[np.argmin(t), np.argmax(t)]]
+    return xy[hull.vertices]  # scipy gives 2-D hull vertices counter-clockwise
