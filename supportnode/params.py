@@ -194,31 +194,32 @@ class ObjectParams:
     )
     convex_cell: float = param(
         0.005,
-        "convex: points in 26-adjacent cells this wide are linked (wider gaps cut); the "
-        "patches are two cells wide",
+        "convex: points in 26-adjacent cells this wide are linked (wider gaps cut); grown "
+        "until a typical cell holds a few points (sparse clouds, maps)",
         "m",
         min=1e-3,
         max=0.1,
     )
+    convex_normal_cells: int = param(
+        2,
+        "convex: a cell's normal comes from the cells within this many cells of it (a "
+        "depth camera's noise and depth steps scatter a one-cell normal)",
+        min=1,
+        max=6,
+    )
     convex_smooth_deg: float = param(
         25.0,
-        "convex: neighbouring patches whose normals differ by less than this stay linked "
-        "where they meet concavely (a bowl's inside)",
+        "convex: faces whose normals differ by less than this stay joined where they meet "
+        "concavely (a bowl's inside)",
         "deg",
         min=0.0,
         max=90.0,
     )
-    convex_crease_curvature: float = param(
-        20.0,
-        "convex: a patch hollow toward the sensor by more than this curvature straddles a "
-        "concave crease and links nothing (it joins a neighbouring segment)",
-        "1/m",
-        min=0.0,
-    )
-    convex_band_sigma: float = param(
-        1.5e-3,
-        "convex: depth noise per squared metre of range (Kinect ~1.5e-3); points within 3 "
-        "sigma of the plane of the surface under them belong to it, never to an object",
+    foot_reach: float = param(
+        0.015,
+        "the points of a surface's noise band under an object go to the object where the "
+        "object comes down to within this of the surface over them (its foot); 0: none",
+        "m",
         min=0.0,
     )
     concave_tolerance: float = param(

@@ -27,6 +27,7 @@ from supportnode.geometry.objects.clusters import (
     _order,
 )
 from supportnode.geometry.objects.convexity import cluster_convex
+from supportnode.geometry.objects.feet import claim_enclosed, claim_feet
 from supportnode.geometry.objects.describe import _describe, _stack
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
@@ -115,6 +116,12 @@ def cluster_objects(
             f"unknown object method {params.method!r}; expected 'knn', 'voxel' or 'convex'"
         )
     lab = _drop_small(lab, params.min_points)
+    claimed = np.zeros(0, np.int64)
+    if params.foot_reach > 0 and surfaces.surfaces and len(lab):
+        if params.method == "knn":
+            support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
+        cand, cp, lab, claimed = _claim_feet(pts, surfaces, cand, cp, lab, support, params)
+        stats["foot_points"] = len(claimed)
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
     seg = _order(cp, lab, lookups[1], params)
     # Each component's surface by its label, for split_objects: a component that is not
@@ -127,7 +134,48 @@ def cluster_objects(
     seg.labels = _full_labels(len(pts), cand, seg.labels)
     stats["time_cluster_s"] = time.perf_counter() - t0
     seg.stats = {"components": n}
-    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats)
+    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed)
+
+
+# The inside of a bowl or a pot (its bottom in the table's band) is at most this large, m^2.
+_MAX_INSIDE = 0.1
+# ... and its points lie this much above the table on average (table seen between objects
+# does not), metres.
+_MIN_RAISE = 0.002
+
+
+def _claim_feet(
+    pts: np.ndarray,
+    surfaces: SurfaceResult,
+    cand: np.ndarray,
+    cp: np.ndarray,
+    lab: np.ndarray,
+    support: np.ndarray,
+    params: ObjectParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The objects' feet (see `feet.claim_feet`) added to the candidates: the surface points
+    under an object and the unclaimed candidates over a surface there. Returns the
+    candidates' rows, points and labels with the feet, and the surface rows taken."""
+    height = np.full(max(s.id for s in surfaces.surfaces) + 1, np.nan)
+    for s in surfaces.surfaces:
+        height[s.id] = s.height
+    on = np.flatnonzero(surfaces.labels >= 0)
+    loose = np.flatnonzero((lab < 0) & (support >= 0))
+    band_xyz = np.concatenate([pts[on], cp[loose]])
+    band_surf = np.concatenate([surfaces.labels[on].astype(np.int64), support[loose]])
+    cell = params.convex_cell
+    owner = claim_feet(band_xyz, band_surf, height, cp, lab, support, height, cell, params.foot_reach)
+    owner = claim_enclosed(
+        band_xyz, band_surf, height, owner, cp, lab, cell, _MAX_INSIDE, _MIN_RAISE
+    )
+    took = owner[: len(on)] >= 0
+    lab = lab.copy()
+    lab[loose] = np.where(owner[len(on) :] >= 0, owner[len(on) :], lab[loose])
+    rows = on[took]
+    cand = np.concatenate([cand, rows])
+    cp = np.concatenate([cp, pts[rows]])
+    lab = np.concatenate([lab, owner[: len(on)][took]])
+    return cand, cp, lab, rows
 
 
 def split_objects(

@@ -81,13 +81,22 @@ def window_normals(
     return normal / np.where(norm > 0, norm, 1.0), variation
 
 
-def orient(normal: np.ndarray, centroid: np.ndarray, origin: np.ndarray | None) -> np.ndarray:
+def orient(
+    normal: np.ndarray,
+    centroid: np.ndarray,
+    origin: np.ndarray | None,
+    group: np.ndarray | None = None,
+) -> np.ndarray:
     """Normals (F, 3) turned toward the sensor at ``origin`` (3,); without one, away from
-    the centroid of all cells."""
-    view = (centroid.mean(axis=0) if origin is None else np.asarray(origin, np.float64)) - centroid
-    flip = np.einsum("ij,ij->i", normal, view) < 0
-    if origin is None:
-        flip = ~flip
+    the centroid of each cell's ``group`` (F,) (all cells when None)."""
+    if origin is not None:
+        view = np.asarray(origin, np.float64) - centroid
+        flip = np.einsum("ij,ij->i", normal, view) < 0
+    else:
+        g = np.zeros(len(centroid), np.int64) if group is None else group
+        n = np.bincount(g).astype(np.float64)
+        mid = np.stack([np.bincount(g, centroid[:, a]) / n for a in range(3)], axis=1)
+        flip = np.einsum("ij,ij->i", normal, centroid - mid[g]) < 0
     return np.where(flip[:, None], -normal, normal)
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.kernels.components import label_edges
 from supportnode.geometry.surfaces.planar import _label_by_plane_of, _label_points_planar, _Planes
 from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
 from supportnode.params import SurfaceParams
@@ -23,6 +24,10 @@ from supportnode.params import SurfaceParams
 # Range bins for the fit, metres wide; a bin needs this many points to count.
 _BIN = 0.2
 _BIN_MIN_POINTS = 50
+# A patch of a surface's band whose columns average this many sigma above the plane, over
+# at least this area (m^2), is no part of it (see drop_raised).
+_RAISED_SIGMAS = 1.5
+_RAISED_MIN_AREA = 0.004
 # Robust sigma from the median absolute residual of a normal distribution.
 _MAD_TO_SIGMA = 1.4826
 
@@ -130,7 +135,7 @@ def label_in_band(
         centre = (grid.keys + 0.5) * grid.size
         r_voxel = np.linalg.norm(centre - np.asarray(sensor_origin, np.float64), axis=1)
     model = fit_noise(
-        labels[on], best[on], None if r_voxel is None else r_voxel[voxel[on]], len(tolerance)
+        labels[on], np.abs(best[on]), None if r_voxel is None else r_voxel[voxel[on]], len(tolerance)
     )
     band = Band(model, params.band_sigmas, params.band_min, r_voxel)
     labels, best = _label_points_planar(
@@ -225,3 +230,46 @@ def refit_planes(
     to = sv[fit][level]
     planes.mean[to] = np.stack(mean, axis=1)[level]
     planes.normal[to] = normal[level]
+
+
+def drop_raised(
+    grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, band: Band, cell: float
+) -> int:
+    """Unlabel, in place, the points of raised patches of a surface's band: ``cell`` columns
+    whose points lie on average more than ``_RAISED_SIGMAS`` sigma above their plane,
+    joined into patches of at least ``_RAISED_MIN_AREA`` m^2. The table's own points average
+    zero; a pot's inner bottom a few millimetres above it (or a sheet lying on it) does not,
+    though each of its points is within the band. Returns the points unlabelled."""
+    at = np.flatnonzero(labels >= 0)
+    if len(at) == 0:
+        return 0
+    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[at]
+    xy = np.stack([grid.local[a][at] + grid.keys[vox, a] * grid.size[a] for a in range(2)], 1)
+    sid = labels[at].astype(np.int64)
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64) + 1
+    span = int(ij[:, 1].max()) + 2
+    key = (sid * (int(ij[:, 0].max()) + 2) + ij[:, 0]) * span + ij[:, 1]
+    keys, inv = np.unique(key, return_inverse=True)
+    inv = inv.reshape(-1)
+    n = np.bincount(inv)
+    mean = np.bincount(inv, best[at]) / n
+    sigma = np.bincount(inv, band.model.sigma(sid, 0.0 if band.r_voxel is None else band.r_voxel[vox])) / n
+    raised = (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
+    if not raised.any():
+        return 0
+    rk = keys[raised]
+    # 8-connected patches of raised columns (keys of one surface differ by span or 1).
+    steps = np.array([1, span - 1, span, span + 1])
+    src, dst = [], []
+    for st in steps:
+        hit = np.searchsorted(rk, rk + st)
+        ok = (hit < len(rk)) & (rk[np.minimum(hit, len(rk) - 1)] == rk + st)
+        src.append(np.flatnonzero(ok))
+        dst.append(hit[ok])
+    patch = label_edges(len(rk), np.concatenate(src), np.concatenate(dst))
+    area = np.bincount(patch) * cell * cell
+    big = np.zeros(len(keys), bool)
+    big[np.flatnonzero(raised)[area[patch] >= _RAISED_MIN_AREA]] = True
+    gone = at[big[inv]]
+    labels[gone] = -1
+    return len(gone)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.errors import InputError
-from supportnode.geometry.surfaces.band import label_in_band, label_ring
+from supportnode.geometry.surfaces.band import drop_raised, label_in_band, label_ring
 from supportnode.geometry.surfaces.clutter import (
     _absorb_clutter,
     _reject_tilted_clutter,
@@ -77,6 +77,8 @@ def detect_surfaces(
         sorted_labels, best, band = label_in_band(
             grid, index, surface_of_voxel, planes, tolerance, sensor_origin, params
         )
+        if band is not None:
+            stats["raised_points"] = drop_raised(grid, sorted_labels, best, band, 0.01)
         if params.clutter_normal_k > 0:
             vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
             stats["clutter_points_rejected"] = _reject_tilted_clutter(
@@ -93,6 +95,7 @@ def detect_surfaces(
         surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
         if band is not None and surfaces:
             _fill_ring(grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces)
+            _note_noise(surfaces, band, lut)
     # Outlines only of the surfaces kept, all traced together.
     cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
@@ -160,3 +163,12 @@ def _fill_ring(grid, index, surface_of_voxel, planes, sorted_labels, best, band,
     added = label_ring(grid, index, surface_of_voxel, kept, planes, sorted_labels, best, band)
     for comp in np.flatnonzero(added):
         surfaces[lut[comp]].point_count += int(added[comp])
+
+
+def _note_noise(surfaces, band, lut) -> None:
+    """Each surface's measured noise and band, from its component's."""
+    for comp in range(min(len(band.model.a), len(lut) - 1)):
+        if lut[comp] >= 0:
+            s = surfaces[lut[comp]]
+            s.noise = (float(band.model.a[comp]), float(band.model.b[comp]))
+            s.band = (band.sigmas, band.floor)
