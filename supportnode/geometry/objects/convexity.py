@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
     Cells,
     grow_faces,
@@ -164,33 +165,83 @@ def cluster_convex(
     origin: np.ndarray | None,
     stats: dict,
 ) -> np.ndarray:
-    """(M,) int64 convex segment of each candidate point cp (M, 3), metres, z up; -1 for the
-    points in the noise band of the surface under them (support: (M,) its id, -1 for none):
-    those are the table's and must never link two objects. The band is the surface's own
-    (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
-    by_id = {s.id: s for s in surfaces}
-    on = support >= 0
-    above = np.full(len(cp), np.inf)
-    band = np.zeros(len(cp))
-    sigma = np.zeros(len(cp))
-    r = np.ones(len(cp)) if origin is None else np.linalg.norm(cp - np.asarray(origin, float), axis=1)
-    for sid in np.unique(support[on]):
-        at = np.flatnonzero(support == sid)
-        s = by_id[int(sid)]
-        above[at] = cp[at, 2] - s.height
-        band[at] = s.band_width(r[at]) if s.band[0] > 0 else _FALLBACK_BAND
-        sigma[at] = np.hypot(s.noise[0], s.noise[1] * r[at] ** 2)
-    free = np.flatnonzero(above > band)
-    stats["band_points"] = int(len(cp) - len(free))
-    lab = np.full(len(cp), -1, np.int64)
-    lab[free] = convex_segments(
+    """(M,) int64 segment of each candidate point cp (M, 3), metres, z up; -1 for none.
+
+    The candidates' connected voxels (:func:`clusters._cluster_voxel`, as the voxel method)
+    that are sampled densely enough to show faces (a typical cell of
+    ``_DENSE_CELLS x convex_cell`` holds a few points: a depth camera's view) are segmented
+    by local convexity; sparser ones (a lidar's far returns, a thinly sampled map) stay
+    whole, to be split by their footprints. In the dense ones the points in the noise band of
+    the surface under them (support: (M,) its id, -1 for none) are the table's and never
+    link two objects: the surface's own band (:meth:`Surface.band_width` at the point's
+    range; 1 m when the sensor is unknown)."""
+    comp = _cluster_voxel(cp, params.voxel_size, stats, support)
+    dense = _dense(cp, comp, params.convex_cell * _DENSE_CELLS)
+    stats["dense_components"] = int(dense.sum())
+    if not dense.any():
+        return comp
+    rows = np.flatnonzero(dense[comp])
+    pts, sup = cp[rows], support[rows]
+    above, band, sigma = _band(pts, sup, surfaces, origin)
+    free = rows[above > band]
+    stats["band_points"] = int(len(rows) - len(free))
+    seg = convex_segments(
         cp[free],
         origin,
         cell=params.convex_cell,
         normal_cells=params.convex_normal_cells,
         smooth_deg=params.convex_smooth_deg,
         min_points=params.min_points,
-        sigma=float(np.median(sigma[free])) if len(free) else 0.0,
+        sigma=float(np.median(sigma[above > band])) if len(free) else 0.0,
     )
-    stats["voxels"] = int(lab.max() + 1) if len(lab) else 0
-    return lab
+    # Sparse components keep their ids; dense ones are replaced by their segments.
+    out = np.where(dense[comp], -1, comp)
+    _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
+    base = int(out.max()) + 1 if (out >= 0).any() else 0
+    out[free] = np.where(seg >= 0, seg + base, -1)
+    stats["convex_segments"] = int(seg.max()) + 1 if len(seg) else 0
+    return out
+
+
+# A voxel component is dense enough for faces when a typical cell of this many convex
+# cells holds _MIN_PER_CELL points (the convex cell would grow at most twice).
+_DENSE_CELLS = 2.25
+
+
+def _dense(cp: np.ndarray, comp: np.ndarray, cell: float) -> np.ndarray:
+    """(C,) bool per component: its median ``cell`` cell holds at least _MIN_PER_CELL."""
+    n = int(comp.max()) + 1 if len(comp) else 0
+    if n == 0:
+        return np.zeros(0, dtype=bool)
+    ijk = np.floor((cp - cp.min(axis=0)) / cell).astype(np.int64)
+    dims = ijk.max(axis=0) + 1
+    key = ((comp * dims[0] + ijk[:, 0]) * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    cells, count = np.unique(key, return_counts=True)
+    owner = cells // (dims[0] * dims[1] * dims[2])
+    order = np.lexsort((count, owner))
+    bounds = np.searchsorted(owner[order], np.arange(n + 1))
+    med = count[order][(bounds[:-1] + bounds[1:]) // 2]
+    return med >= _MIN_PER_CELL
+
+
+def _band(
+    pts: np.ndarray, support: np.ndarray, surfaces: list[Surface], origin: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point's height above the surface under it (inf over none), that surface's band
+    half-width and noise sigma at the point's range, metres: three (M,)."""
+    by_id = {s.id: s for s in surfaces}
+    above = np.full(len(pts), np.inf)
+    band = np.zeros(len(pts))
+    sigma = np.zeros(len(pts))
+    r = (
+        np.ones(len(pts))
+        if origin is None
+        else np.linalg.norm(pts - np.asarray(origin, float), axis=1)
+    )
+    for sid in np.unique(support[support >= 0]):
+        at = np.flatnonzero(support == sid)
+        s = by_id[int(sid)]
+        above[at] = pts[at, 2] - s.height
+        band[at] = s.band_width(r[at]) if s.band[1] > 0 else _FALLBACK_BAND
+        sigma[at] = np.hypot(s.noise[0], s.noise[1] * r[at] ** 2)
+    return above, band, sigma

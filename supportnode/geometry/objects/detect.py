@@ -117,7 +117,7 @@ def cluster_objects(
         )
     lab = _drop_small(lab, params.min_points)
     claimed = np.zeros(0, np.int64)
-    if params.foot_reach > 0 and surfaces.surfaces and len(lab):
+    if params.foot_reach > 0 and any(s.band[0] > 0 for s in surfaces.surfaces) and len(lab):
         if params.method == "knn":
             support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         cand, cp, lab, claimed = _claim_feet(pts, surfaces, cand, cp, lab, support, params)
@@ -159,8 +159,15 @@ def _claim_feet(
     height = np.full(max(s.id for s in surfaces.surfaces) + 1, np.nan)
     for s in surfaces.surfaces:
         height[s.id] = s.height
+    # Only over surfaces whose noise band labelled them (a depth camera's): elsewhere the
+    # surface's own tolerance and k-NN normals already decided (see surfaces.band).
+    by_band = np.zeros(len(height), dtype=bool)
+    for s in surfaces.surfaces:
+        by_band[s.id] = s.band[0] > 0
     on = np.flatnonzero(surfaces.labels >= 0)
+    on = on[by_band[surfaces.labels[on]]]
     loose = np.flatnonzero((lab < 0) & (support >= 0))
+    loose = loose[by_band[support[loose]]]
     band_xyz = np.concatenate([pts[on], cp[loose]])
     band_surf = np.concatenate([surfaces.labels[on].astype(np.int64), support[loose]])
     cell = params.convex_cell

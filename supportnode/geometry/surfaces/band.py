@@ -94,17 +94,22 @@ def _fit_bins(var: np.ndarray, r4: np.ndarray, w: np.ndarray, ranged: bool) -> t
 
 @dataclass(frozen=True)
 class Band:
-    """Each surface's noise band: ``width(surface, voxel)`` (K,) metres for surface ids (K,)
-    and the grid's voxels (K,) holding the points, from the model and the voxels' range."""
+    """Each surface's band: ``width(surface, voxel)`` (K,) metres for surface components
+    (K,) and the grid's voxels (K,) holding the points: ``sigmas`` noise sigmas at the
+    voxels' range, at least ``floor``, for the components the band decides (``by_band``,
+    (C,)); the growth's ``tolerance`` (C,) for the others (and as a ceiling)."""
 
     model: NoiseModel
     sigmas: float
     floor: float
     r_voxel: np.ndarray | None  # (M,) range of each voxel's centre from the sensor, m
+    by_band: np.ndarray
+    tolerance: np.ndarray
 
     def width(self, surface: np.ndarray, voxel: np.ndarray) -> np.ndarray:
         r = 0.0 if self.r_voxel is None else self.r_voxel[voxel]
-        return np.maximum(self.sigmas * self.model.sigma(surface, r), self.floor)
+        w = np.maximum(self.sigmas * self.model.sigma(surface, r), self.floor)
+        return np.where(self.by_band[surface], np.minimum(w, self.tolerance[surface]), self.tolerance[surface])
 
 
 def label_in_band(
@@ -117,31 +122,45 @@ def label_in_band(
     params: SurfaceParams,
 ) -> tuple[np.ndarray, np.ndarray, Band | None]:
     """Surface labels in the grid's voxel order (as ``_label_points_planar``), the points'
-    distances to their planes, and the surfaces' noise band (by surface component; None
+    heights above their planes, metres, and the surfaces' band (by surface component; None
     when ``params.band_sigmas`` is 0: ``tolerance`` alone).
 
     The points within the growth's ``tolerance`` (per component) measure each surface's
-    noise; the labels are then redone within ``params.band_sigmas`` sigma at the range of
-    each point's voxel, at least ``params.band_min``, at most ``tolerance``."""
+    noise. Where the band decides (:func:`band_decides`: a depth camera's surfaces), the
+    voxels' planes are refitted over their neighbours' inliers and the labels redone within
+    ``params.band_sigmas`` sigma at the range of each point's voxel, at least
+    ``params.band_min``, at most ``tolerance``; elsewhere ``tolerance`` stays."""
     labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
     if params.band_sigmas <= 0 or not (labels >= 0).any():
         return labels, best, None
-    refit_planes(grid, index, surface_of_voxel, planes, labels)
-    labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
-    on = np.flatnonzero(labels >= 0)
-    voxel = np.repeat(np.arange(len(grid.counts)), grid.counts)
     r_voxel = None
     if sensor_origin is not None:
         centre = (grid.keys + 0.5) * grid.size
         r_voxel = np.linalg.norm(centre - np.asarray(sensor_origin, np.float64), axis=1)
-    model = fit_noise(
-        labels[on], np.abs(best[on]), None if r_voxel is None else r_voxel[voxel[on]], len(tolerance)
-    )
-    band = Band(model, params.band_sigmas, params.band_min, r_voxel)
+    model = _fit(grid, labels, best, r_voxel, len(tolerance))
+    none = np.zeros(len(tolerance), dtype=bool)
+    band = Band(model, params.band_sigmas, params.band_min, r_voxel, none, tolerance)
+    by_band = band_decides(grid, labels, surface_of_voxel, band, params.clutter_normal_k)
+    if not by_band.any():
+        return labels, best, band
+    refit_planes(grid, index, surface_of_voxel, planes, labels, by_band)
+    labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
+    model = _fit(grid, labels, best, r_voxel, len(tolerance))
+    band = Band(model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance)
     labels, best = _label_points_planar(
         grid, index, surface_of_voxel, planes, tolerance, band.width
     )
     return labels, best, band
+
+
+def _fit(
+    grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, r_voxel: np.ndarray | None, n: int
+) -> NoiseModel:
+    """:func:`fit_noise` of the labelled points (``best``: their heights above the planes)."""
+    on = np.flatnonzero(labels >= 0)
+    voxel = np.repeat(np.arange(len(grid.counts)), grid.counts)[on]
+    r = None if r_voxel is None else r_voxel[voxel]
+    return fit_noise(labels[on].astype(np.int64), np.abs(best[on]), r, n)
 
 
 # The voxels beside a surface voxel (and a layer up or down) that the ring pass labels.
@@ -188,13 +207,15 @@ def refit_planes(
     surface_of_voxel: np.ndarray,
     planes: _Planes,
     labels: np.ndarray,
+    which: np.ndarray,
 ) -> None:
     """Refit, in place, each surface voxel's plane to the labelled points of its surface in
     the voxels around it (3 x 3 columns): a voxel holding an object's foot fits a plane
     tilted toward it, which a narrow band then misses on the table side; its neighbours'
     inliers outvote the foot. labels: (N,) surface component per point in the grid's voxel
-    order, -1 for none."""
+    order, -1 for none; which: (C,) bool, the components refitted."""
     sv = np.flatnonzero(surface_of_voxel >= 0)
+    sv = sv[which[surface_of_voxel[sv]]]
     at = np.flatnonzero(labels >= 0)
     if len(sv) == 0 or len(at) == 0:
         return
@@ -255,6 +276,7 @@ def drop_raised(
     mean = np.bincount(inv, best[at]) / n
     sigma = np.bincount(inv, band.model.sigma(sid, 0.0 if band.r_voxel is None else band.r_voxel[vox])) / n
     raised = (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
+    raised &= band.by_band[keys // ((int(ij[:, 0].max()) + 2) * span)]
     if not raised.any():
         return 0
     rk = keys[raised]
@@ -273,3 +295,34 @@ def drop_raised(
     gone = at[big[inv]]
     labels[gone] = -1
     return len(gone)
+
+
+# k-NN normals vet a surface's points (the clutter test) only where the neighbourhood of
+# clutter_normal_k points is this many noise sigmas wide: on a dense, noisy depth image ten
+# neighbours span a few millimetres, and their normals scatter like the noise.
+_VET_MIN_SIGMAS = 8.0
+
+
+def band_decides(
+    grid: VoxelGrid, labels: np.ndarray, surface_of_voxel: np.ndarray, band: Band, k: int
+) -> np.ndarray:
+    """(C,) bool per surface component: the noise band, not k-NN normals, decides which of
+    its points are on it (a depth camera's surfaces). There the points' k-NN normals say
+    nothing about tilt (their neighbourhood, ~ spacing sqrt(k / pi) wide, is under
+    ``_VET_MIN_SIGMAS`` sigma), while the band is thin against an object (at most a quarter
+    of a voxel's height): the objects' feet are told apart by where the objects stand. On a
+    cloud noisy beyond that (a slab as thick as the objects are tall), neither tells."""
+    n_comp = len(band.model.a)
+    at = np.flatnonzero(labels >= 0)
+    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[at]
+    comp = labels[at].astype(np.int64)
+    count = np.bincount(comp, minlength=n_comp).astype(np.float64)
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    cols = np.unique(np.stack([surface_of_voxel[sv], grid.keys[sv, 0], grid.keys[sv, 1]], 1), axis=0)
+    area = np.bincount(cols[:, 0], minlength=n_comp) * grid.size[0] * grid.size[1]
+    spacing = np.sqrt(area / np.maximum(count, 1.0))
+    r = np.zeros(len(at)) if band.r_voxel is None else band.r_voxel[vox]
+    r_med = np.array([np.median(r[comp == c]) if count[c] else 0.0 for c in range(n_comp)])
+    sigma = band.model.sigma(np.arange(n_comp), r_med)
+    thin = band.sigmas * sigma <= 0.25 * grid.size[2]
+    return (count > 0) & thin & (spacing * np.sqrt(k / np.pi) < _VET_MIN_SIGMAS * sigma)

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.errors import InputError
-from supportnode.geometry.surfaces.band import drop_raised, label_in_band, label_ring
+from supportnode.geometry.surfaces.band import (
+    drop_raised,
+    label_in_band,
+    label_ring,
+)
 from supportnode.geometry.surfaces.clutter import (
     _absorb_clutter,
     _reject_tilted_clutter,
@@ -77,10 +81,15 @@ def detect_surfaces(
         sorted_labels, best, band = label_in_band(
             grid, index, surface_of_voxel, planes, tolerance, sensor_origin, params
         )
+        by_band = None
         if band is not None:
+            by_band = band.by_band
+            stats["band_surfaces"] = int(by_band.sum())
             stats["raised_points"] = drop_raised(grid, sorted_labels, best, band, 0.01)
         if params.clutter_normal_k > 0:
             vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
+            if by_band is not None:
+                vetted = vetted[~by_band[surface_of_voxel[vetted].clip(0)]]
             stats["clutter_points_rejected"] = _reject_tilted_clutter(
                 grid, index, sorted_labels, vetted, params
             )
@@ -94,7 +103,9 @@ def detect_surfaces(
     if params.method == "planar":
         surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
         if band is not None and surfaces:
-            _fill_ring(grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces)
+            _fill_ring(
+                grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces, by_band
+            )
             _note_noise(surfaces, band, lut)
     # Outlines only of the surfaces kept, all traced together.
     cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
@@ -153,13 +164,18 @@ def _grow_seed(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, dict
     return surface_of_voxel, {"occupied_voxels": len(occupied)}
 
 
-def _fill_ring(grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces):
-    """The band's ring pass (:func:`label_ring`) for the surfaces kept; their point counts
-    follow."""
+def _fill_ring(
+    grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces, by_band
+):
+    """The band's ring pass (:func:`label_ring`) for the surfaces kept whose points the band
+    decides (``by_band``: (C,) per component); their point counts follow."""
     n_comp = int(surface_of_voxel.max()) + 1
     m = min(n_comp, len(lut) - 1)  # lut's last entry maps -1
     kept = np.zeros(n_comp, dtype=bool)
     kept[:m] = lut[:m] >= 0
+    kept &= by_band[:n_comp]
+    if not kept.any():
+        return
     added = label_ring(grid, index, surface_of_voxel, kept, planes, sorted_labels, best, band)
     for comp in np.flatnonzero(added):
         surfaces[lut[comp]].point_count += int(added[comp])
@@ -171,4 +187,8 @@ def _note_noise(surfaces, band, lut) -> None:
         if lut[comp] >= 0:
             s = surfaces[lut[comp]]
             s.noise = (float(band.model.a[comp]), float(band.model.b[comp]))
-            s.band = (band.sigmas, band.floor)
+            s.band = (
+                (band.sigmas, band.floor)
+                if band.by_band[comp]
+                else (0.0, float(band.tolerance[comp]))
+            )
