@@ -65,7 +65,8 @@ class SurfaceParams:
     point_tolerance: float = param(
         0.01,
         "planar: a point is on a surface if this close to the surface's local plane "
-        "(widened to 3x the surface's median voxel roughness on noisy clouds)",
+        "(widened to 3x the surface's median voxel roughness on noisy clouds); a depth "
+        "camera's surfaces use their noise band instead (band_sigmas), at most this wide",
         "m",
         min=0.0,
     )
@@ -156,10 +157,11 @@ class ObjectParams:
     """Supported-object segmentation (Algorithm 2 of the report and the voxel default)."""
 
     method: str = param(
-        "voxel",
+        "convex",
         "'knn': the report's Algorithm 2 (sampled k-NN graph); 'voxel': connected "
-        "occupied voxels of a fine grid, no sampling; 'convex': patches joined where they "
-        "meet convexly or smoothly, cut at concave creases (touching and stacked objects)",
+        "occupied voxels of a fine grid, no sampling; 'convex': as voxel, then the densely "
+        "sampled groups (a depth camera's) split into smooth faces joined where they meet "
+        "convexly, cut at concave creases (touching and stacked objects)",
         choices=("knn", "voxel", "convex"),
     )
     k: int = param(20, "knn: neighbours linked per sampled point", min=1, max=500)
