@@ -138,7 +138,7 @@ def dump_default_yaml(root_type: type[Any] = DetectParams) -> str:
     """The text of ``config/default.yaml``: every key with its default and a comment."""
     header = [
         "# supportnode configuration: every key with its built-in default.",
-        "# Generated from supportnode/params.py: python -m supportnode.config > config/default.yaml",
+        "# Generated from supportnode/params/: python -m supportnode.config > config/default.yaml",
         "# (do not edit by hand; tests/test_config.py checks that this file is up to date).",
         "# Precedence: built-in defaults < YAML file < --set key=value. A config file needs only",
         "# the keys it changes; unknown keys are errors.",
