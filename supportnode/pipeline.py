@@ -168,7 +168,10 @@ def detect(
         t = time.perf_counter()
         gravity = estimate_gravity(pts, params.gravity, sensor_origin=sensor_origin)
         rotation = gravity.rotation
-        if origin_assumed and not abs(gravity.sensor_height) > 2.0 * params.gravity.voxel_size:
+        if (
+            origin_assumed
+            and not abs(gravity.sensor_height) > 2.0 * params.gravity.downsample_voxel
+        ):
             sensor_origin = None
         pts = transform_points(pts, rotation)
         timings["gravity"] = time.perf_counter() - t

@@ -1,8 +1,8 @@
 """Loading the configuration: built-in defaults < YAML file < ``--set key=value`` overrides.
 
 Every problem raises `ConfigError` with one line naming where it is (``file:line`` or ``--set ...``)
-and which key, e.g. ``config/my.yaml:7: unknown key 'surfaces.voxl_size' (did you mean
-'voxel_size'?)``. Unknown keys are never ignored; a key that was removed or renamed is an error
+and which key, e.g. ``config/my.yaml:7: unknown key 'surfaces.plane_voxl' (did you mean
+'plane_voxel'?)``. Unknown keys are never ignored; a key that was removed or renamed is an error
 naming what replaces it (`supportnode.config.schema.REMOVED_KEYS`). YAML is composed into nodes
 (not ``safe_load``) so that every value keeps its line number.
 
@@ -24,7 +24,7 @@ from typing import Any, TypeAlias, TypeVar, overload
 
 import yaml
 
-from supportnode.config.schema import REMOVED_KEYS, Leaf, Section, num, schema_of
+from supportnode.config.schema import REMOVED_KEYS, RENAMED_KEYS, Leaf, Section, num, schema_of
 from supportnode.errors import ConfigError
 from supportnode.params import DetectParams
 from supportnode.yamlnodes import Constructor, compose, line_of, read_text, short_tag
@@ -130,8 +130,18 @@ class _Checker:
         if full in REMOVED_KEYS:
             raise self.source.fail(node, f"key '{full}' was {REMOVED_KEYS[full]}")
         known = list(schema.fields)
-        close = difflib.get_close_matches(key, known, n=1)
-        hint = f"did you mean '{close[0]}'?" if close else "known keys: " + ", ".join(known)
+        # A misspelt old name suggests the new one ('voxl_size' -> 'plane_voxel').
+        parent = full.rpartition(".")[0]
+        renamed = {
+            old.rpartition(".")[2]: new.rpartition(".")[2]
+            for old, new in RENAMED_KEYS.items()
+            if old.rpartition(".")[0] == parent
+        }
+        close = difflib.get_close_matches(key, known + list(renamed), n=1)
+        if close:
+            hint = f"did you mean '{renamed.get(close[0], close[0])}'?"
+        else:
+            hint = "known keys: " + ", ".join(known)
         raise self.source.fail(node, f"unknown key '{full}' ({hint})")
 
     def leaf(self, leaf: Leaf, node: yaml.Node, path: str) -> Any:
@@ -243,7 +253,7 @@ _NOT_SCALAR = object()
 def parse_override(text: str) -> tuple[list[str], Any]:
     """Split a ``--set`` override ``"a.b=value"`` into its key path and its YAML value.
 
-    The value is parsed as YAML (``objects.k=50`` gives 50, ``surfaces.voxel_size=[0.1,0.1,0.07]``
+    The value is parsed as YAML (``objects.k=50`` gives 50, ``surfaces.plane_voxel=[0.1,0.1,0.07]``
     a list, ``surfaces.method=seed`` the string); type and range checks happen in `load_config`.
     Raises `ConfigError` naming the override when it has no ``=``, a malformed key or bad YAML.
     """
@@ -289,7 +299,7 @@ def load_config(
     """Build the configuration: built-in defaults < YAML file ``path`` < ``overrides``.
 
     ``path`` may be None (defaults only); an empty file also means all defaults. ``overrides`` are
-    ``--set`` strings such as ``"surfaces.voxel_size=[0.1,0.1,0.07]"`` or ``"objects.k=50"``,
+    ``--set`` strings such as ``"surfaces.plane_voxel=[0.1,0.1,0.07]"`` or ``"objects.k=50"``,
     applied in order (a later one wins). ``root_type`` is the root dataclass (default
     `DetectParams`). Raises `ConfigError` with one line naming file:line (or the override) and key.
     """

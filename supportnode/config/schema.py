@@ -38,6 +38,15 @@ REMOVED_KEYS: dict[str, str] = {
     "normals": "removed in 0.2: use surfaces.normal_filter_k and surfaces.clutter_normal_k",
 }
 
+# Keys renamed for what they are (four keys were all called voxel_size): old -> new dotted key.
+# Each is in REMOVED_KEYS too: "key 'surfaces.voxel_size' was renamed in 0.2: use '...'".
+RENAMED_KEYS: dict[str, str] = {
+    "surfaces.voxel_size": "surfaces.plane_voxel",
+    "objects.voxel_size": "objects.cluster_cell",
+    "gravity.voxel_size": "gravity.downsample_voxel",
+}
+REMOVED_KEYS.update({old: f"renamed in 0.2: use '{new}'" for old, new in RENAMED_KEYS.items()})
+
 
 @dataclass(frozen=True)
 class Leaf:

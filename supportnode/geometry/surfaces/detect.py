@@ -40,7 +40,7 @@ def detect_surfaces(
     """
     params = params or SurfaceParams()
     pts = _check_points(points)
-    size = np.asarray(params.voxel_size, dtype=np.float64)
+    size = np.asarray(params.plane_voxel, dtype=np.float64)
     keep = None
     if params.normal_filter and len(pts):
         keep = _normal_filter_mask(pts, params)
@@ -89,7 +89,7 @@ def detect_surfaces(
     if params.method == "planar":
         surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
     # Outlines only of the surfaces kept, all traced together.
-    cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
+    cell_size = (float(params.plane_voxel[0]), float(params.plane_voxel[1]))
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
     for s, outline in zip(surfaces, outlines, strict=True):
         s.outline = outline
@@ -121,7 +121,7 @@ def _normal_filter_mask(pts: np.ndarray, params: SurfaceParams) -> np.ndarray:
     candidates are points in voxels that pass p_min; others cannot be surface points anyway."""
     from supportnode.geometry.normals import filter_vertical_normals
 
-    grid = voxelize(pts, np.asarray(params.voxel_size, dtype=np.float64))
+    grid = voxelize(pts, np.asarray(params.plane_voxel, dtype=np.float64))
     candidate = (grid.counts > params.p_min)[grid.point_voxel]
     return (
         filter_vertical_normals(

@@ -102,7 +102,7 @@ def _summarise(
     vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
     run_xy_min, run_xy_max = r_min[:, :2], r_max[:, :2]
     run_cells = grid.keys[run_vox, :2]
-    vx, vy = float(params.voxel_size[0]), float(params.voxel_size[1])
+    vx, vy = float(params.plane_voxel[0]), float(params.plane_voxel[1])
     area, cells_of = _footprint_areas(
         run_cells, run_g, run_xy_min, run_xy_max, run_n, s_count, (vx, vy)
     )
