@@ -75,7 +75,7 @@ _SCHEMAS: dict[type, Section] = {}
 
 
 def schema_of(cls: type) -> Section:
-    """The schema of dataclass ``cls``; raises TypeError for a field type the loader cannot parse."""
+    """The schema of dataclass ``cls``; TypeError for a field type the loader cannot parse."""
     if cls not in _SCHEMAS:
         _SCHEMAS[cls] = _make_schema(cls)
     return _SCHEMAS[cls]

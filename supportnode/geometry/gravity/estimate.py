@@ -1,8 +1,8 @@
 """Gravity alignment without an IMU: find the up axis from the scene's planes.
 
 Steps (vectorised or compiled; Python loops run over a handful of families or planes):
-1. Voxel-downsample (``GravityParams.downsample_voxel``) so every voxel stands for about the same area
-   whatever the sensor density; counts of downsampled normals are then areas.
+1. Voxel-downsample (``GravityParams.downsample_voxel``) so every voxel stands for about the same
+   area whatever the sensor density; counts of downsampled normals are then areas.
 2. k-NN normals of the downsampled points; keep the planar ones (low surface variation).
 3. Plane families: directions on the sphere, n and -n being one axis, where many normals agree.
 4. The up family and its sign (:mod:`.choice`), or with ``up_hint`` the family nearest the
