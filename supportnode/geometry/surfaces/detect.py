@@ -40,56 +40,29 @@ def detect_surfaces(
     """
     params = params or SurfaceParams()
     pts = _check_points(points)
-    size = np.asarray(params.voxel_size, dtype=np.float64)
+    size = np.asarray(params.plane_voxel, dtype=np.float64)
     keep = None
     if params.normal_filter and len(pts):
         keep = _normal_filter_mask(pts, params)
     used = pts if keep is None else pts[keep]
     grid = voxelize(used, size)
     # Point labels are kept in the grid's voxel order (contiguous per voxel) until the end.
+    widths: dict[bytes, float] | None = None
     if params.method == "seed":
         surface_of_voxel, stats = _grow_seed(grid, params)
         sorted_labels = np.repeat(surface_of_voxel, grid.counts)
     elif params.method == "planar":
-        index = KeyIndex.build(grid.keys)
-        surface_of_voxel, planes, stats = _grow_planar(grid, index, params)
-        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
-        absorbed = _absorb_clutter(grid, index, surface_of_voxel, planes, tolerance, params)
-        stats["absorbed_voxels"] = len(absorbed)
-        # Pieces of one board, split by the objects on it, meet once grown around them.
-        sv = np.flatnonzero(surface_of_voxel >= 0)
-        edges: list = []
-        if len(sv):
-            surface_of_voxel[sv] = _connect(
-                grid, index, sv, planes.mean[sv], planes.normal[sv], params, edges=edges
-            )
-            tolerance = _surface_tolerance(surface_of_voxel, planes, params)
-        # Size limits apply to what a surface became: a board seen between objects is a
-        # narrow strip until it has grown under and around them.
-        widths: dict[bytes, float] = {}
-        stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params, widths)
-        # A cutting board or a plate joins the worktop it lies on: cut it out again.
-        stats["plateau_voxels"] = (
-            _drop_raised_plateaus(grid, surface_of_voxel, planes, tolerance, sv, *edges, params)
-            if edges
-            else 0
-        )
-        sorted_labels = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
-        vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
-        stats["clutter_points_rejected"] = _reject_tilted_clutter(
-            grid, index, sorted_labels, vetted, params
-        )
+        widths = {}
+        surface_of_voxel, sorted_labels, stats = _label_planar(grid, params, widths)
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
     # Surface ids by the points' labels so far (lut[label], -1 for -1): one gather of all
     # points at the end, not one a stage.
-    surfaces, lut = _summarise(
-        grid, sorted_labels, surface_of_voxel, params, widths if params.method == "planar" else None
-    )
+    surfaces, lut = _summarise(grid, sorted_labels, surface_of_voxel, params, widths)
     if params.method == "planar":
         surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
     # Outlines only of the surfaces kept, all traced together.
-    cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
+    cell_size = (float(params.plane_voxel[0]), float(params.plane_voxel[1]))
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
     for s, outline in zip(surfaces, outlines, strict=True):
         s.outline = outline
@@ -104,6 +77,45 @@ def detect_surfaces(
     if keep is not None:
         stats["normal_filter_removed"] = int(len(pts) - keep.sum())
     return SurfaceResult(surfaces=surfaces, labels=labels, stats=stats)
+
+
+def _label_planar(
+    grid: VoxelGrid, params: SurfaceParams, widths: dict[bytes, float]
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The planar method's surface of each voxel, label of each point (grid order) and stats.
+
+    Grows level voxels into surfaces, absorbs the clutter around them, joins the pieces they
+    meet, applies the size limits (footprint widths measured go into ``widths``), cuts raised
+    plateaus out and vets the points admitted in cluttered voxels by their normals."""
+    index = KeyIndex.build(grid.keys)
+    surface_of_voxel, planes, stats = _grow_planar(grid, index, params)
+    tolerance = _surface_tolerance(surface_of_voxel, planes, params)
+    absorbed = _absorb_clutter(grid, index, surface_of_voxel, planes, tolerance, params)
+    stats["absorbed_voxels"] = len(absorbed)
+    # Pieces of one board, split by the objects on it, meet once grown around them.
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    edges: list[np.ndarray] = []
+    if len(sv):
+        surface_of_voxel[sv] = _connect(
+            grid, index, sv, planes.mean[sv], planes.normal[sv], params, edges=edges
+        )
+        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
+    # Size limits apply to what a surface became: a board seen between objects is a
+    # narrow strip until it has grown under and around them.
+    stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params, widths)
+    # A cutting board or a plate joins the worktop it lies on: cut it out again.
+    stats["plateau_voxels"] = 0
+    if edges:
+        src, dst = edges  # the pairs of sv that _connect joined
+        stats["plateau_voxels"] = _drop_raised_plateaus(
+            grid, surface_of_voxel, planes, tolerance, sv, src, dst, params
+        )
+    sorted_labels = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
+    vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
+    stats["clutter_points_rejected"] = _reject_tilted_clutter(
+        grid, index, sorted_labels, vetted, params
+    )
+    return surface_of_voxel, sorted_labels, stats
 
 
 def _check_points(points: np.ndarray) -> np.ndarray:
@@ -121,7 +133,7 @@ def _normal_filter_mask(pts: np.ndarray, params: SurfaceParams) -> np.ndarray:
     candidates are points in voxels that pass p_min; others cannot be surface points anyway."""
     from supportnode.geometry.normals import filter_vertical_normals
 
-    grid = voxelize(pts, np.asarray(params.voxel_size, dtype=np.float64))
+    grid = voxelize(pts, np.asarray(params.plane_voxel, dtype=np.float64))
     candidate = (grid.counts > params.p_min)[grid.point_voxel]
     return (
         filter_vertical_normals(
