@@ -109,7 +109,7 @@ def main() -> int:
         return 2
     _, m = collections.deque(moving_maps(args.scans), maxlen=1)[0]  # the last state
     pts = np.ascontiguousarray(m.points(), dtype=np.float64)
-    size = np.asarray(DetectParams().surfaces.voxel_size, dtype=np.float64)
+    size = np.asarray(DetectParams().surfaces.plane_voxel, dtype=np.float64)
     grid = voxelize(pts, size)
     counts, order, sums, outer = voxelize_nb(pts, size)
     same = np.array_equal(counts, grid.counts) and np.array_equal(order, grid.order)

@@ -56,8 +56,8 @@ def main() -> None:
     rows = []
     for label, scene, n, voxel, report in CASES:
         pts = sampled_scene(scene, n).points.astype("float64")
-        seed = SurfaceParams(method="seed", voxel_size=voxel)
-        planar = SurfaceParams(method="planar", voxel_size=voxel)
+        seed = SurfaceParams(method="seed", plane_voxel=voxel)
+        planar = SurfaceParams(method="planar", plane_voxel=voxel)
         t_seed = median_time(lambda p=seed, x=pts: detect_surfaces(x, p), args.repeats)
         t_planar = median_time(lambda p=planar, x=pts: detect_surfaces(x, p), args.repeats)
         t_o3d = open3d_plane(pts, args.repeats)

@@ -37,7 +37,6 @@ peer is heard again once it is there.
 from __future__ import annotations
 
 import collections
-import errno
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, TypeAlias
@@ -46,6 +45,7 @@ import zmq
 
 from supportnode._closing import Closing
 from supportnode.curve import CurveKeys, configure_curve, release_curve
+from supportnode.endpoints import attach, check_endpoint
 from supportnode.errors import BusError
 from supportnode.handshake import HandshakeWatch
 
@@ -63,7 +63,6 @@ __all__ = [
 #: One multipart message: ``[topic, *payload]``. Received payload frames are zero-copy views.
 Frames: TypeAlias = "list[bytes | memoryview]"
 
-_SCHEMES = ("tcp://", "ipc://", "inproc://")
 # Upper bound of messages drained in one recv: a publisher faster than draining must not keep a
 # consumer in the drain loop forever.
 _MAX_DRAIN = 10_000
@@ -73,38 +72,6 @@ _REFILL_WAIT_MS = 5
 # that lands just before the poll call would otherwise wait for the next message, forever on a
 # quiet topic (an example program ignored Ctrl-C that way, now and then).
 _WAIT_SLICE_MS = 100
-
-
-def check_endpoint(endpoint: str) -> str:
-    """``endpoint`` unchanged if it is a tcp://, ipc:// or inproc:// address, else a BusError."""
-    if not isinstance(endpoint, str) or not endpoint.startswith(_SCHEMES):
-        raise BusError(
-            f"{endpoint!r}: unsupported endpoint (expected tcp://host:port, ipc://path "
-            "or inproc://name)"
-        )
-    if endpoint.startswith("tcp://") and ":" not in endpoint[len("tcp://") :]:
-        raise BusError(f"{endpoint}: tcp endpoint without a port (expected tcp://host:port)")
-    return endpoint
-
-
-def _attach(sock: zmq.Socket, endpoint: str, bind: bool) -> str:
-    """Bind or connect ``sock``; returns the resolved endpoint (the actual port for ``:*``)."""
-    check_endpoint(endpoint)
-    try:
-        if bind:
-            sock.bind(endpoint)
-            return str(sock.getsockopt_string(zmq.LAST_ENDPOINT)) or endpoint
-        sock.connect(endpoint)
-        return endpoint
-    except zmq.ZMQError as err:
-        verb = "bind" if bind else "connect"
-        if err.errno == errno.EADDRINUSE:
-            raise BusError(f"{endpoint}: address already in use") from err
-        if err.errno == errno.EADDRNOTAVAIL:
-            raise BusError(f"{endpoint}: cannot {verb}: no such local address") from err
-        if err.errno == errno.EACCES:
-            raise BusError(f"{endpoint}: cannot {verb}: permission denied") from err
-        raise BusError(f"{endpoint}: cannot {verb} ({err.strerror})") from err
 
 
 class _Socket(Closing):
@@ -127,7 +94,7 @@ class _Socket(Closing):
             self._watch = HandshakeWatch(
                 self.socket, endpoint, name=kind, connects=not bind, report=watch
             )
-        self.endpoint = _attach(self.socket, endpoint, bind)
+        self.endpoint = attach(self.socket, endpoint, bind)
         if self._watch is not None:
             self._watch.endpoint = self.endpoint  # the port bound for tcp://host:*
 

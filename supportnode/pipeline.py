@@ -168,20 +168,15 @@ def detect(
     rotation = None
     gravity = None
     if align:
-        from supportnode.geometry.gravity import estimate_gravity
-
         t = time.perf_counter()
-        gravity = estimate_gravity(pts, params.gravity, sensor_origin=sensor_origin)
+        gravity = _estimate_gravity(pts, params, sensor_origin)
         rotation = gravity.rotation
-        if origin_assumed and not abs(gravity.sensor_height) > 2.0 * params.gravity.voxel_size:
+        if origin_assumed and not _sensor_off_the_plane(gravity, params):
             sensor_origin = None
         pts = transform_points(pts, rotation)
         timings["gravity"] = time.perf_counter() - t
     t = time.perf_counter()
-    origin = None
-    if sensor_origin is not None:
-        origin = np.asarray(sensor_origin, dtype=np.float64)
-        origin = origin if rotation is None else rotation @ origin
+    origin = _in_detection_frame(sensor_origin, rotation)
     surfaces = detect_surfaces(pts, params.surfaces, sensor_origin=origin)
     timings["surfaces"] = time.perf_counter() - t
     object_result = None
@@ -195,3 +190,28 @@ def detect(
             on_surfaces(surfaces, free, early.components.segmentation)
         object_result = objects_stage(early, params, memo)
     return Detection(surfaces, object_result, free, timings, rotation, gravity)
+
+
+def _estimate_gravity(
+    pts: np.ndarray, params: DetectParams, sensor_origin: np.ndarray | None
+) -> GravityEstimate:
+    """The gravity estimate of the cloud (imported here: only alignment needs that module)."""
+    from supportnode.geometry.gravity import estimate_gravity
+
+    return estimate_gravity(pts, params.gravity, sensor_origin=sensor_origin)
+
+
+def _in_detection_frame(
+    sensor_origin: np.ndarray | None, rotation: np.ndarray | None
+) -> np.ndarray | None:
+    """The sensor origin (3,) m rotated as the points were (None stays None)."""
+    if sensor_origin is None:
+        return None
+    origin = np.asarray(sensor_origin, dtype=np.float64)
+    return origin if rotation is None else rotation @ origin
+
+
+def _sensor_off_the_plane(gravity: GravityEstimate, params: DetectParams) -> bool:
+    """Whether the assumed sensor origin stands clear of the support plane alignment found
+    (more than two downsampling voxels from it)."""
+    return abs(gravity.sensor_height) > 2.0 * params.gravity.downsample_voxel

@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from supportnode.config import (
+    RENAMED_KEYS,
     config_to_dict,
     dump_default_yaml,
     dump_yaml,
@@ -77,7 +78,7 @@ def test_yaml_overrides_defaults(tmp_path: Path) -> None:
         """
         surfaces:
           method: seed
-          voxel_size: [0.1, 0.1, 0.07]
+          plane_voxel: [0.1, 0.1, 0.07]
           max_step: 1      # an integer is fine for a float
           normal_filter: true
         objects:
@@ -93,7 +94,7 @@ def test_yaml_overrides_defaults(tmp_path: Path) -> None:
     assert cfg.surfaces == dataclasses.replace(
         SurfaceParams(),
         method="seed",
-        voxel_size=(0.1, 0.1, 0.07),
+        plane_voxel=(0.1, 0.1, 0.07),
         max_step=1.0,
         normal_filter=True,
     )
@@ -131,14 +132,14 @@ def test_later_set_wins_and_sections_can_be_set_whole() -> None:
     cfg = load_config(None, ["objects.k=5", "objects.k=6", "surfaces={method: seed, p_min: 4}"])
     assert cfg.objects.k == 6
     assert (cfg.surfaces.method, cfg.surfaces.p_min) == ("seed", 4)
-    assert cfg.surfaces.voxel_size == SurfaceParams().voxel_size
+    assert cfg.surfaces.plane_voxel == SurfaceParams().plane_voxel
 
 
 def test_report_overrides_from_the_brief() -> None:
     cfg = load_config(
-        None, ["surfaces.voxel_size=[0.1,0.1,0.07]", "objects.k=50", "surfaces.method=seed"]
+        None, ["surfaces.plane_voxel=[0.1,0.1,0.07]", "objects.k=50", "surfaces.method=seed"]
     )
-    assert cfg.surfaces.voxel_size == (0.1, 0.1, 0.07)
+    assert cfg.surfaces.plane_voxel == (0.1, 0.1, 0.07)
     assert cfg.objects.k == 50
     assert cfg.surfaces.method == "seed"
 
@@ -158,7 +159,7 @@ def test_pathlike_and_root_type(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        ("surfaces.voxel_size=[0.1,0.1,0.07]", (["surfaces", "voxel_size"], [0.1, 0.1, 0.07])),
+        ("surfaces.plane_voxel=[0.1,0.1,0.07]", (["surfaces", "plane_voxel"], [0.1, 0.1, 0.07])),
         ("objects.k=50", (["objects", "k"], 50)),
         ("surfaces.method=seed", (["surfaces", "method"], "seed")),
         ("surfaces.normal_filter=true", (["surfaces", "normal_filter"], True)),
@@ -207,12 +208,34 @@ def test_unknown_key_names_file_line_and_suggestion(tmp_path: Path) -> None:
           p_min: 3
 
           # finer voxels
-          voxl_size: [0.1, 0.1, 0.07]
+          plane_voxl: [0.1, 0.1, 0.07]
         """,
     )
     assert config_error(path) == (
-        f"{path}:7: unknown key 'surfaces.voxl_size' (did you mean 'voxel_size'?)"
+        f"{path}:7: unknown key 'surfaces.plane_voxl' (did you mean 'plane_voxel'?)"
     )
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "value", "expected"),
+    [
+        ("surfaces.voxel_size", "surfaces.plane_voxel", "[0.1, 0.1, 0.07]", (0.1, 0.1, 0.07)),
+        ("objects.voxel_size", "objects.cluster_cell", "0.05", 0.05),
+        ("gravity.voxel_size", "gravity.downsample_voxel", "0.1", 0.1),
+    ],
+)
+def test_renamed_keys_name_their_replacement(
+    tmp_path: Path, old: str, new: str, value: str, expected: Any
+) -> None:
+    assert RENAMED_KEYS[old] == new
+    section, name = old.split(".")
+    path = write(tmp_path, f"{section}:\n  {name}: {value}\n")
+    assert config_error(path) == f"{path}:2: key '{old}' was renamed in 0.2: use '{new}'"
+    assert config_error(None, (f"{old}={value}",)) == (
+        f"--set {old}={value}: key '{old}' was renamed in 0.2: use '{new}'"
+    )
+    cfg = load_config(None, (f"{new}={value}",))
+    assert getattr(getattr(cfg, section), new.split(".")[1]) == expected
 
 
 def test_unknown_section_suggests_and_lists(tmp_path: Path) -> None:
@@ -275,16 +298,16 @@ def test_out_of_range(tmp_path: Path) -> None:
         ),
         ("surfaces:\n  method: 1\n", "surfaces.method: expected a string, got 1"),
         (
-            "surfaces:\n  voxel_size: 0.1\n",
-            "surfaces.voxel_size: expected a list of 3 numbers, got 0.1",
+            "surfaces:\n  plane_voxel: 0.1\n",
+            "surfaces.plane_voxel: expected a list of 3 numbers, got 0.1",
         ),
         (
-            "surfaces:\n  voxel_size: [0.1, 0.1]\n",
-            "surfaces.voxel_size: expected a list of 3 numbers, got a list of 2 items",
+            "surfaces:\n  plane_voxel: [0.1, 0.1]\n",
+            "surfaces.plane_voxel: expected a list of 3 numbers, got a list of 2 items",
         ),
         (
-            "surfaces:\n  voxel_size: [0.1, 0.1, 0]\n",
-            "surfaces.voxel_size[2]: 0.0 m is below the minimum 0.001 m",
+            "surfaces:\n  plane_voxel: [0.1, 0.1, 0]\n",
+            "surfaces.plane_voxel[2]: 0.0 m is below the minimum 0.001 m",
         ),
     ],
 )
@@ -294,8 +317,8 @@ def test_wrong_values(tmp_path: Path, body: str, message: str) -> None:
 
 
 def test_tuple_element_error_names_its_own_line(tmp_path: Path) -> None:
-    path = write(tmp_path, "surfaces:\n  voxel_size:\n    - 0.1\n    - x\n    - 0.07\n")
-    assert config_error(path) == f"{path}:4: surfaces.voxel_size[1]: expected a number, got 'x'"
+    path = write(tmp_path, "surfaces:\n  plane_voxel:\n    - 0.1\n    - x\n    - 0.07\n")
+    assert config_error(path) == f"{path}:4: surfaces.plane_voxel[1]: expected a number, got 'x'"
 
 
 def test_section_given_as_scalar(tmp_path: Path) -> None:
@@ -374,7 +397,7 @@ def test_config_error_is_a_supportnode_error(tmp_path: Path) -> None:
     [
         (
             "surfaces.voxl_size=[0.1,0.1,0.07]",
-            "unknown key 'surfaces.voxl_size' (did you mean 'voxel_size'?)",
+            "unknown key 'surfaces.voxl_size' (did you mean 'plane_voxel'?)",
         ),
         ("surfce.method=seed", "unknown key 'surfce' (did you mean 'surfaces'?)"),
         ("objects.kk=3", "unknown key 'objects.kk' (did you mean 'k'?)"),
@@ -383,7 +406,7 @@ def test_config_error_is_a_supportnode_error(tmp_path: Path) -> None:
         ("objects.k=", "objects.k: expected an integer, got nothing (null)"),
         ("surfaces.method=sed", "surfaces.method: 'sed' is not one of seed, planar"),
         ("objects.k=501", "objects.k: 501 is above the maximum 500"),
-        ("surfaces.voxel_size=0.1", "surfaces.voxel_size: expected a list of 3 numbers, got 0.1"),
+        ("surfaces.plane_voxel=0.1", "surfaces.plane_voxel: expected a list of 3 numbers, got 0.1"),
         ("surfaces=3", "surfaces: expected a section (a mapping of keys), got 3"),
         (
             "surfaces.method.x=1",
@@ -406,7 +429,7 @@ def test_set_errors_name_the_override(tmp_path: Path, text: str, message: str) -
 def test_config_to_dict_is_plain_and_json_ready() -> None:
     cfg = DetectParams()
     d = config_to_dict(cfg)
-    assert d["surfaces"]["voxel_size"] == [0.1, 0.1, 0.05]
+    assert d["surfaces"]["plane_voxel"] == [0.1, 0.1, 0.05]
     assert d["objects"]["method"] == "voxel"
     assert set(d) == {f.name for f in dataclasses.fields(DetectParams)}
     assert json.loads(json.dumps(d)) == d
@@ -607,7 +630,7 @@ def test_default_yaml_documents_every_field() -> None:
 def test_noisy_yaml() -> None:
     cfg = load_config(CONFIG_DIR / "noisy.yaml")
     s = cfg.surfaces
-    assert s.voxel_size[2] in (0.07, 0.1)
+    assert s.plane_voxel[2] in (0.07, 0.1)
     assert s.max_roughness == pytest.approx(0.03)
     assert s.point_tolerance == pytest.approx(0.05)
     assert s.max_step == pytest.approx(0.05)
@@ -616,7 +639,7 @@ def test_noisy_yaml() -> None:
 def test_report_yaml() -> None:
     cfg = load_config(CONFIG_DIR / "report.yaml")
     assert cfg.surfaces.method == "seed"
-    assert cfg.surfaces.voxel_size == (0.1, 0.1, 0.07)
+    assert cfg.surfaces.plane_voxel == (0.1, 0.1, 0.07)
     assert cfg.objects.method == "knn"
     assert cfg.objects.k == 50
     assert cfg.objects.sample_fraction == 0.3
@@ -667,8 +690,8 @@ def test_every_param_field_has_help_and_a_valid_default() -> None:
             "objects: expected a section (a mapping of keys), got a mapping tagged !foo",
         ),
         (
-            "surfaces:\n  voxel_size: !!set {a, b, c}\n",
-            "surfaces.voxel_size: expected a list of 3 numbers, got a mapping tagged !!set",
+            "surfaces:\n  plane_voxel: !!set {a, b, c}\n",
+            "surfaces.plane_voxel: expected a list of 3 numbers, got a mapping tagged !!set",
         ),
     ],
 )
@@ -679,9 +702,11 @@ def test_tags_beyond_plain_yaml_are_rejected(tmp_path: Path, body: str, message:
 
 
 def test_aliases_are_followed_without_expansion(tmp_path: Path) -> None:
-    path = write(tmp_path, "surfaces:\n  voxel_size: &v [0.2, 0.2, 0.1]\ngravity:\n  up_hint: *v\n")
+    path = write(
+        tmp_path, "surfaces:\n  plane_voxel: &v [0.2, 0.2, 0.1]\ngravity:\n  up_hint: *v\n"
+    )
     cfg = load_config(path)
-    assert cfg.surfaces.voxel_size == cfg.gravity.up_hint == (0.2, 0.2, 0.1)
+    assert cfg.surfaces.plane_voxel == cfg.gravity.up_hint == (0.2, 0.2, 0.1)
 
 
 def test_removed_normals_section_names_its_replacement(tmp_path: Path) -> None:

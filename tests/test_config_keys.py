@@ -29,7 +29,7 @@ DEFAULT = ROOT / "config" / "default.yaml"
 # key -> (scene[@points], changed value, context settings, align)
 DETECTION_PROBES: dict[str, tuple[str, str, tuple[str, ...], bool]] = {
     "surfaces.method": ("kitchen", "seed", (), False),
-    "surfaces.voxel_size": ("kitchen", "[0.2, 0.2, 0.1]", (), False),
+    "surfaces.plane_voxel": ("kitchen", "[0.2, 0.2, 0.1]", (), False),
     "surfaces.p_min": ("kitchen", "8", (), False),
     "surfaces.psi_min": ("kitchen", "40", ("surfaces.method=seed",), False),
     "surfaces.connectivity": ("kitchen", "4", ("surfaces.method=seed",), False),
@@ -55,7 +55,7 @@ DETECTION_PROBES: dict[str, tuple[str, str, tuple[str, ...], bool]] = {
     "objects.sample_fraction": ("kitchen", "0.075", ("objects.method=knn",), False),
     "objects.seed": ("kitchen", "3", ("objects.method=knn",), False),
     "objects.label_radius": ("kitchen", "0.2", ("objects.method=knn",), False),
-    "objects.voxel_size": ("kitchen", "0.12", (), False),
+    "objects.cluster_cell": ("kitchen", "0.12", (), False),
     "objects.min_points": ("kitchen", "120", (), False),
     "objects.support_tolerance": ("kitchen", "0.2", (), False),
     "objects.split_touching": ("u_table@100000", "false", (), False),
@@ -75,7 +75,7 @@ DETECTION_PROBES: dict[str, tuple[str, str, tuple[str, ...], bool]] = {
     "freespace.margin": ("kitchen", "0.2", (), False),
     "gravity.up_hint": ("kitchen", "[1.0, 0.0, 0.0]", (), True),
     "gravity.hint_cone_deg": ("kitchen", "5", ("gravity.up_hint=[0.3, 0, 1]",), True),
-    "gravity.voxel_size": ("table_chairs", "0.2", (), True),
+    "gravity.downsample_voxel": ("table_chairs", "0.2", (), True),
     "gravity.inlier_angle_deg": ("kitchen", "40.0", (), True),
     "safe.min_area": ("kitchen", "5.0", (), False),
     "safe.max_flatness": ("kitchen", "0.0001", (), False),

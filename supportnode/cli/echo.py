@@ -214,50 +214,11 @@ def to_json(msg: Any, topic: str, size: int) -> dict[str, Any]:
         "bytes": size,
     }
     if isinstance(msg, PointCloud):
-        out["count"] = msg.count
-        out["fields"] = {k: _array_summary(v) for k, v in msg.fields.items()}
-        out["dropped_nonfinite"] = msg.dropped_nonfinite
-        out["pose"] = (
-            None
-            if msg.pose is None
-            else {"translation": msg.pose.translation, "rotation": msg.pose.rotation}
-        )
-        out["gravity"] = msg.gravity
-        out["imu_orientation"] = msg.imu_orientation
+        out.update(_cloud_json(msg))
     elif isinstance(msg, SupportSurfaces):
-        out["surfaces"] = [
-            {
-                "id": s.id,
-                "height": s.height,
-                "normal": s.normal,
-                "area": s.area,
-                "free_area": s.free_area,
-                "disc_center": s.disc_center,
-                "disc_radius": s.disc_radius,
-                "flatness": s.flatness,
-                "point_count": s.point_count,
-                "safe": s.safe,
-                "outline": {"rings": len(s.outline), "vertices": [len(r) for r in s.outline]},
-            }
-            for s in msg.surfaces
-        ]
+        out["surfaces"] = [_surface_json(s) for s in msg.surfaces]
     elif isinstance(msg, ObstacleClusters):
-        out["clusters"] = [
-            {
-                "id": c.id,
-                "surface_id": c.surface_id,
-                "centroid": c.centroid,
-                "bbox_min": c.bbox_min,
-                "bbox_max": c.bbox_max,
-                "obb_center": c.obb_center,
-                "obb_size": c.obb_size,
-                "obb_yaw": c.obb_yaw,
-                "height": c.height,
-                "point_count": c.point_count,
-                "points": None if c.points is None else _array_summary(c.points),
-            }
-            for c in msg.clusters
-        ]
+        out["clusters"] = [_cluster_json(c) for c in msg.clusters]
     elif isinstance(msg, Diagnostics):
         out["node"] = msg.node
         out["level"] = msg.level
@@ -266,6 +227,54 @@ def to_json(msg: Any, topic: str, size: int) -> dict[str, Any]:
         out["latencies"] = {k: {"p50": v.p50, "p99": v.p99} for k, v in msg.latencies.items()}
         out["gauges"] = dict(msg.gauges)
     return _plain(out)
+
+
+def _cloud_json(msg: Any) -> dict[str, Any]:
+    """A PointCloud's fields after the common ones: arrays as dtype and shape."""
+    return {
+        "count": msg.count,
+        "fields": {k: _array_summary(v) for k, v in msg.fields.items()},
+        "dropped_nonfinite": msg.dropped_nonfinite,
+        "pose": None
+        if msg.pose is None
+        else {"translation": msg.pose.translation, "rotation": msg.pose.rotation},
+        "gravity": msg.gravity,
+        "imu_orientation": msg.imu_orientation,
+    }
+
+
+def _surface_json(s: Any) -> dict[str, Any]:
+    """One surface of a SupportSurfaces message; its outline as ring and vertex counts."""
+    return {
+        "id": s.id,
+        "height": s.height,
+        "normal": s.normal,
+        "area": s.area,
+        "free_area": s.free_area,
+        "disc_center": s.disc_center,
+        "disc_radius": s.disc_radius,
+        "flatness": s.flatness,
+        "point_count": s.point_count,
+        "safe": s.safe,
+        "outline": {"rings": len(s.outline), "vertices": [len(r) for r in s.outline]},
+    }
+
+
+def _cluster_json(c: Any) -> dict[str, Any]:
+    """One cluster of an ObstacleClusters message; its points as dtype and shape."""
+    return {
+        "id": c.id,
+        "surface_id": c.surface_id,
+        "centroid": c.centroid,
+        "bbox_min": c.bbox_min,
+        "bbox_max": c.bbox_max,
+        "obb_center": c.obb_center,
+        "obb_size": c.obb_size,
+        "obb_yaw": c.obb_yaw,
+        "height": c.height,
+        "point_count": c.point_count,
+        "points": None if c.points is None else _array_summary(c.points),
+    }
 
 
 def _array_summary(a: np.ndarray) -> dict[str, Any]:

@@ -235,8 +235,6 @@ class Player:
         import sys
         import time
 
-        import msgpack
-
         from supportnode.bus import Publisher
         from supportnode.errors import SupportNodeError
         from supportnode.io.sources import SourceMessage
@@ -264,11 +262,7 @@ class Player:
                     raise item
                 raise SupportNodeError(f"{self.src.path}: {item}") from item
             if isinstance(item, tuple):  # end of one pass: the next starts one period later
-                n = item[1]
-                if pass_first is not None and n > 0:
-                    span = t_last - pass_first
-                    period = span / (n - 1) if n > 1 else 1.0 / args.hz
-                    offset += span + period
+                offset += self._pass_length(pass_first, t_last, item[1])
                 pass_first = None
                 continue
             assert isinstance(item, SourceMessage)
@@ -283,15 +277,7 @@ class Player:
             if self.stop["now"]:
                 self.stop["interrupted"] = True
                 return False
-            frames = list(item.frames)
-            topic = bytes(memoryview(frames[0]))
-            if topic in self.remap:
-                frames[0] = self.remap[topic]
-            if args.restamp:
-                header = msgpack.unpackb(frames[1], raw=False)
-                header["stamp"] = time.time()
-                frames[1] = msgpack.packb(header, use_bin_type=True)
-            pub.send(frames)
+            pub.send(self._frames(item))
             now = time.monotonic()
             self.lags.append(now - due)
             self.sent += 1
@@ -304,6 +290,31 @@ class Player:
                 print(f"\r{self.progress()}", end=end, file=sys.stderr, flush=True)
         self.stop["interrupted"] = True
         return False
+
+    def _pass_length(self, first: float | None, last: float, n: int) -> float:
+        """Recording time (s) one finished pass of ``n`` messages, stamped ``first`` to
+        ``last``, takes up: its span and one period more; 0 for an empty pass."""
+        if first is None or n <= 0:
+            return 0.0
+        span = last - first
+        period = span / (n - 1) if n > 1 else 1.0 / self.args.hz
+        return span + period
+
+    def _frames(self, item: Any) -> list[Any]:
+        """The frames of a recorded message as they go out: topic remapped, restamped now."""
+        import time
+
+        import msgpack
+
+        frames = list(item.frames)
+        topic = bytes(memoryview(frames[0]))
+        if topic in self.remap:
+            frames[0] = self.remap[topic]
+        if self.args.restamp:
+            header = msgpack.unpackb(frames[1], raw=False)
+            header["stamp"] = time.time()
+            frames[1] = msgpack.packb(header, use_bin_type=True)
+        return frames
 
     def progress(self) -> str:
         total = self.src.duration()

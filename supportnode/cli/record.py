@@ -208,21 +208,7 @@ def _record(
     taps: list[Tap] = []
     poller = zmq.Poller()
     try:
-        for i, ep in enumerate(endpoints):
-            # Deep receive queue: ZeroMQ's I/O thread keeps receiving while we compress a
-            # chunk. A socket per endpoint: each may have its own CURVE server key.
-            taps.append(
-                Tap(
-                    ep,
-                    sorted(topics),
-                    bind=args.bind,
-                    context=ctx,
-                    rcvhwm=max(1, args.queue),
-                    curve=curve_keys(args, args.bind, i),
-                    watch=handshake_report("record"),
-                )
-            )
-            poller.register(taps[-1].socket, zmq.POLLIN)
+        _open_taps(args, endpoints, topics, ctx, poller, taps)
         if not args.quiet:
             what = ", ".join(args.topics) or "all topics"
             print(
@@ -251,6 +237,37 @@ def _record(
             tap.close()
         ctx.term()
     return stats
+
+
+def _open_taps(
+    args: argparse.Namespace,
+    endpoints: list[str],
+    topics: set[bytes],
+    ctx: Any,
+    poller: Any,
+    taps: list[Any],
+) -> None:
+    """A Tap per endpoint, appended to ``taps`` (closed by the caller, also after an error)
+    and registered with ``poller``."""
+    import zmq
+
+    from supportnode.bus import Tap
+
+    for i, ep in enumerate(endpoints):
+        # Deep receive queue: ZeroMQ's I/O thread keeps receiving while we compress a
+        # chunk. A socket per endpoint: each may have its own CURVE server key.
+        taps.append(
+            Tap(
+                ep,
+                sorted(topics),
+                bind=args.bind,
+                context=ctx,
+                rcvhwm=max(1, args.queue),
+                curve=curve_keys(args, args.bind, i),
+                watch=handshake_report("record"),
+            )
+        )
+        poller.register(taps[-1].socket, zmq.POLLIN)
 
 
 def _drain(sock: object, topics: set[bytes], w: object, stats: _Stats) -> None:

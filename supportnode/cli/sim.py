@@ -10,8 +10,13 @@ supportnode sim tabletop --sensor camera --preset kinect --noise kinect --organi
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from supportnode.cli._console import progress
+
+if TYPE_CHECKING:
+    from supportnode.sim.noise import NoiseSpec
+    from supportnode.sim.sensors import DepthCamera, Lidar
 
 SENSORS = ("sample", "lidar", "camera")
 LIDAR_PRESETS = ("vlp16", "os128")
@@ -78,7 +83,6 @@ def run(args: argparse.Namespace) -> int:
     from supportnode.sim.files import write_sim_clouds
     from supportnode.sim.noise import parse_noise
     from supportnode.sim.scene import load_scene
-    from supportnode.sim.sensors import DepthCamera, Lidar
     from supportnode.sim.trajectory import poses_for
 
     scene = load_scene(args.scene)
@@ -90,31 +94,12 @@ def run(args: argparse.Namespace) -> int:
         "noise": list(args.noise),
         "seed": args.seed,
     }
-    if args.sensor == "sample":
-        if args.points < 1:
-            raise ConfigError(f"--points must be at least 1, got {args.points}")
-        if args.preset is not None or args.frames != 1 or args.frame != "world":
-            raise ConfigError("--preset, --frames and --frame apply to --sensor lidar or camera")
-        if noise.range > 0:
-            raise ConfigError("range noise follows sensor rays: use --sensor lidar or camera")
-    if args.sensor != "camera" and (noise.kinect > 0 or args.organized or args.frame == "optical"):
-        raise ConfigError("kinect noise, --organized and --frame optical need --sensor camera")
+    _check_sensor_args(args, noise)
     if args.sensor == "sample":
         clouds = [simulate.sampled(scene, args.points, args.seed, noise)]
         meta["points"] = args.points
     else:
-        if args.frames < 1:
-            raise ConfigError(f"--frames must be at least 1, got {args.frames}")
-        if args.sensor == "lidar":
-            preset = args.preset or "vlp16"
-            if preset not in LIDAR_PRESETS:
-                raise ConfigError(f"--preset {preset} is a camera preset; lidar: vlp16, os128")
-            sensor: Lidar | DepthCamera = Lidar.preset(preset)
-        else:
-            preset = args.preset or "vga"
-            if preset not in CAMERA_PRESETS:
-                raise ConfigError(f"--preset {preset} is a lidar preset; camera: d435, vga")
-            sensor = DepthCamera.preset(preset)
+        preset, sensor = _sensor(args)
         # A lidar rides level on a robot; a camera tilts down to look at the target.
         poses = poses_for(scene, args.frames, level=args.sensor == "lidar")
         with progress(f"sim {scene.name}", len(poses), "frames", args.quiet) as bar:
@@ -138,6 +123,39 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"{path} ({len(clouds[i])} points)" if i < len(clouds) else path)
     return 0
+
+
+def _check_sensor_args(args: argparse.Namespace, noise: NoiseSpec) -> None:
+    """Raise ConfigError for options that do not go with ``--sensor`` (or out of range)."""
+    from supportnode.errors import ConfigError
+
+    if args.sensor == "sample":
+        if args.points < 1:
+            raise ConfigError(f"--points must be at least 1, got {args.points}")
+        if args.preset is not None or args.frames != 1 or args.frame != "world":
+            raise ConfigError("--preset, --frames and --frame apply to --sensor lidar or camera")
+        if noise.range > 0:
+            raise ConfigError("range noise follows sensor rays: use --sensor lidar or camera")
+    if args.sensor != "camera" and (noise.kinect > 0 or args.organized or args.frame == "optical"):
+        raise ConfigError("kinect noise, --organized and --frame optical need --sensor camera")
+    if args.sensor != "sample" and args.frames < 1:
+        raise ConfigError(f"--frames must be at least 1, got {args.frames}")
+
+
+def _sensor(args: argparse.Namespace) -> tuple[str, Lidar | DepthCamera]:
+    """The preset's name and the simulated sensor of ``--sensor lidar|camera --preset``."""
+    from supportnode.errors import ConfigError
+    from supportnode.sim.sensors import DepthCamera, Lidar
+
+    if args.sensor == "lidar":
+        preset = args.preset or "vlp16"
+        if preset not in LIDAR_PRESETS:
+            raise ConfigError(f"--preset {preset} is a camera preset; lidar: vlp16, os128")
+        return preset, Lidar.preset(preset)
+    preset = args.preset or "vga"
+    if preset not in CAMERA_PRESETS:
+        raise ConfigError(f"--preset {preset} is a lidar preset; camera: d435, vga")
+    return preset, DepthCamera.preset(preset)
 
 
 def _write_recording(out: str, clouds: list, meta: dict, quiet: bool) -> int:

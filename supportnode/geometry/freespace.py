@@ -89,11 +89,52 @@ def _free_space(
     arrays, metres, whose cells are occupied (how the points are grouped does not matter), or
     None to fill footprints, their (K_i, 2) convex footprints."""
     c = float(params.cell_size)
-    vx, vy = (float(v) for v in surface.cell_size)
+    cell_size = (float(surface.cell_size[0]), float(surface.cell_size[1]))
     cells = np.asarray(surface.cells, dtype=np.int64).reshape(-1, 2)
+    frame = _raster_frame(cells, cell_size, extents, c)
+    if frame is None:
+        return _empty(surface.id, c)
+    origin, w, h = frame
+    surf = _surface_raster(cells, cell_size, origin, c, (h, w))
+    objects = _object_raster(object_xy, footprints, origin, c, (h, w))
+    # The table is under its objects even where it has no points (occluded by them).
+    surf |= objects
+    surf[0, :] = surf[-1, :] = surf[:, 0] = surf[:, -1] = False  # the blocked border
 
-    # Extent: the footprint cells and the objects on them, plus one blocked cell all round so the
-    # distance transform sees the surface's edge as blocked.
+    if objects.any():
+        # Dilation by margin: distance from each cell centre to the nearest object cell centre.
+        occupied = _dilate_margin(objects, c, params.margin)
+    else:
+        occupied = objects
+    occupied &= surf
+    free = surf & ~occupied
+    centre, radius = _largest_disc(free, origin, c)
+    # The raster counts border cells whole; the surface's measured area does not. Share that
+    # area out in the raster's proportions so that free + occupied == area.
+    n_surf = max(int(surf.sum()), 1)
+    return FreeSpace(
+        surface_id=int(surface.id),
+        free_area=float(surface.area) * float(free.sum()) / n_surf,
+        occupied_area=float(surface.area) * float(occupied.sum()) / n_surf,
+        disc_center=centre,
+        disc_radius=radius,
+        grid_origin=origin,
+        cell_size=c,
+        free_mask=free,
+    )
+
+
+def _raster_frame(
+    cells: np.ndarray,
+    cell_size: tuple[float, float],
+    extents: list[tuple[np.ndarray, np.ndarray]],
+    c: float,
+) -> tuple[np.ndarray, int, int] | None:
+    """The raster's origin (2,) m and width, height in cells of ``c`` m, or None when empty.
+
+    It spans the footprint cells and the objects on them, plus one blocked cell all round so
+    the distance transform sees the surface's edge as blocked."""
+    vx, vy = cell_size
     lo_parts, hi_parts = [], []
     if len(cells):
         lo_parts.append(cells.min(axis=0) * [vx, vy])
@@ -102,14 +143,26 @@ def _free_space(
         lo_parts.append(lo_xy)
         hi_parts.append(hi_xy)
     if not lo_parts:
-        return _empty(surface.id, c)
+        return None
     lo = np.min(lo_parts, axis=0)
     hi = np.max(hi_parts, axis=0)
     origin = np.floor(lo / c) * c - c
     w, h = (np.ceil((hi - origin) / c).astype(np.int64) + 1).tolist()
+    return origin, w, h
 
-    # Surface: fine cell centres looked up in the coarse footprint (1-D per axis, then an outer
-    # index, so no per-cell loop).
+
+def _surface_raster(
+    cells: np.ndarray,
+    cell_size: tuple[float, float],
+    origin: np.ndarray,
+    c: float,
+    shape: tuple[int, int],
+) -> np.ndarray:
+    """(h, w) bool: the fine cells whose centres lie in the surface's coarse footprint cells.
+
+    Looked up 1-D per axis, then by an outer index, so there is no per-cell loop."""
+    vx, vy = cell_size
+    h, w = shape
     xc = origin[0] + (np.arange(w) + 0.5) * c
     yc = origin[1] + (np.arange(h) + 0.5) * c
     surf = np.zeros((h, w), dtype=bool)
@@ -125,7 +178,18 @@ def _free_space(
         if len(xs) and len(ys):
             sub = coarse.take(ix[xs], axis=0).take(iy[ys], axis=1).T  # (rows y, cols x)
             surf[ys[0] : ys[-1] + 1, xs[0] : xs[-1] + 1] = sub
+    return surf
 
+
+def _object_raster(
+    object_xy: list[np.ndarray] | None,
+    footprints: list[np.ndarray] | None,
+    origin: np.ndarray,
+    c: float,
+    shape: tuple[int, int],
+) -> np.ndarray:
+    """(h, w) bool: the cells of the objects' points, or of their filled convex footprints."""
+    h, w = shape
     objects = np.zeros((h, w), dtype=bool)
     if object_xy is not None:
         for xy in object_xy:  # one iteration per group of points
@@ -135,50 +199,30 @@ def _free_space(
     else:
         for fp in footprints or []:  # one iteration per object
             _fill_convex(objects, fp, origin, c)
-    # The table is under its objects even where it has no points (occluded by them).
-    surf |= objects
-    surf[0, :] = surf[-1, :] = surf[:, 0] = surf[:, -1] = False  # the blocked border
+    return objects
 
-    if objects.any():
-        # Dilation by margin: distance from each cell centre to the nearest object cell centre.
-        occupied = _dilate_margin(objects, c, params.margin)
-    else:
-        occupied = objects
-    occupied &= surf
-    free = surf & ~occupied
 
-    if free.any():
-        # The transform on the box of the free cells and one cell around: every cell outside
-        # it is blocked, and for a cell inside, the blocked cell on that ring straight towards
-        # any blocked cell outside is no further. The same distances, on a smaller raster.
-        r0, r1, c0, c1 = _box(free)
-        d2 = _squared_edt(free[r0 - 1 : r1 + 1, c0 - 1 : c1 + 1])
-        top = d2.max()
-        best = np.sqrt(np.float64(top))  # the transform's maximum, as it computes it
-        rows, cols = np.nonzero(d2 == top)
-        rows += r0 - 1  # raster indices, row-major as np.nonzero over the whole raster
-        cols += c0 - 1
-        # Of the equally good cells (e.g. the 2x2 centre of an even square), the one nearest
-        # their mean: centred, and still a free cell.
-        k = int(np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2))
-        centre = origin + (np.array([cols[k], rows[k]]) + 0.5) * c
-        radius = max(0.0, (float(best) - 0.5) * c)  # to the blocked cell's edge, not its centre
-    else:
-        centre = np.full(2, np.nan)
-        radius = 0.0
-    # The raster counts border cells whole; the surface's measured area does not. Share that
-    # area out in the raster's proportions so that free + occupied == area.
-    n_surf = max(int(surf.sum()), 1)
-    return FreeSpace(
-        surface_id=int(surface.id),
-        free_area=float(surface.area) * float(free.sum()) / n_surf,
-        occupied_area=float(surface.area) * float(occupied.sum()) / n_surf,
-        disc_center=centre,
-        disc_radius=radius,
-        grid_origin=origin,
-        cell_size=c,
-        free_mask=free,
-    )
+def _largest_disc(free: np.ndarray, origin: np.ndarray, c: float) -> tuple[np.ndarray, float]:
+    """Centre (2,) m and radius m of the largest disc within the free cells (NaN, 0: none).
+
+    The transform runs on the box of the free cells and one cell around: every cell outside it
+    is blocked, and for a cell inside, the blocked cell on that ring straight towards any
+    blocked cell outside is no further. The same distances, on a smaller raster."""
+    if not free.any():
+        return np.full(2, np.nan), 0.0
+    r0, r1, c0, c1 = _box(free)
+    d2 = _squared_edt(free[r0 - 1 : r1 + 1, c0 - 1 : c1 + 1])
+    top = d2.max()
+    best = np.sqrt(np.float64(top))  # the transform's maximum, as it computes it
+    rows, cols = np.nonzero(d2 == top)
+    rows += r0 - 1  # raster indices, row-major as np.nonzero over the whole raster
+    cols += c0 - 1
+    # Of the equally good cells (e.g. the 2x2 centre of an even square), the one nearest
+    # their mean: centred, and still a free cell.
+    k = int(np.argmin((rows - rows.mean()) ** 2 + (cols - cols.mean()) ** 2))
+    centre = origin + (np.array([cols[k], rows[k]]) + 0.5) * c
+    radius = max(0.0, (float(best) - 0.5) * c)  # to the blocked cell's edge, not its centre
+    return centre, radius
 
 
 def free_space_all(

@@ -14,8 +14,8 @@ points.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import nullcontext
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -59,9 +59,6 @@ def normals_at(
     tree: ``cKDTree(points)``; points: (N, 3) float64 m; query: (M, 3) float64 m.
     Returns ``(normals (M, 3) unit, sign arbitrary; curvature (M,) in [0, 1/3])``.
     """
-    # Imported here: importing the geometry (as the wire's types do) must not load numba.
-    from supportnode.kernels.neighbourhoods import neighbourhood_covariances
-
     m = query.shape[0]
     n = points.shape[0]
     k = int(min(k, n))
@@ -72,6 +69,30 @@ def normals_at(
     chunk = max(1, _CHUNK_VALUES // k)
     if m < _PARALLEL_MIN_QUERIES:
         workers = 1  # the same neighbours; threads cost more to start than they save here
+    neighbours = _chunk_search(tree, query, k, workers, chunk)
+    if m <= chunk:
+        # A query of one chunk has nothing to overlap: it is searched here, without a thread.
+        _chunk_normals(_centred(points), neighbours(0), normals, curvature, 0)
+        return normals, curvature
+    # The query of the next chunk runs in a thread while this one's moments are summed (both
+    # release the GIL): the single-threaded numpy work can then overlap the k-d tree search
+    # instead of following it (when a core is free: 0-5% measured on a busy 2-core machine).
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        pending = pool.submit(neighbours, 0)
+        c = _centred(points)
+        for start in range(0, m, chunk):  # loop over chunks of ~20k points, not over points
+            stop = min(start + chunk, m)
+            idx = pending.result()
+            if stop < m:
+                pending = pool.submit(neighbours, stop)
+            _chunk_normals(c, idx, normals, curvature, start)
+    return normals, curvature
+
+
+def _chunk_search(
+    tree: cKDTree, query: np.ndarray, k: int, workers: int, chunk: int
+) -> Callable[[int], np.ndarray]:
+    """The neighbour search of one chunk of ``chunk`` queries, by its first query's index."""
     bound = _knn_bound(tree, query, k, workers)
 
     def neighbours(start: int) -> np.ndarray:
@@ -89,34 +110,39 @@ def normals_at(
             idx[short] = tree.query(q[short], k=k, workers=workers)[1].reshape(-1, k)
         return idx
 
-    # The query of the next chunk runs in a thread while this one's moments are summed (both
-    # release the GIL): the single-threaded numpy work can then overlap the k-d tree search
-    # instead of following it (when a core is free: 0-5% measured on a busy 2-core machine).
-    # A query of one chunk has nothing to overlap: it is searched here, without a thread.
-    single = m <= chunk
-    with nullcontext() if single else ThreadPoolExecutor(max_workers=1) as pool:
-        pending = None if single else pool.submit(neighbours, 0)
-        # Each query's neighbourhood covariance summed as its neighbours are read (compiled:
-        # no selection matrix, no gathers). Coordinates are taken about the centre of the
-        # points' bounding box, so the cancellation in E[pp'] - E[p]E[p]' is about eps * R^2
-        # with R the half-extent of the cloud: 2e-12 m^2 for R = 100 m against neighbourhood
-        # variances of 1e-5 m^2 and more (1e-7 rad of normal), wherever the cloud lies.
-        # Column by column: numpy reduces (N, 3) arrays along axis 0 20x slower than 1-D.
-        origin = np.array([(points[:, j].min() + points[:, j].max()) / 2.0 for j in range(3)])
-        c = points - origin
-        for start in range(0, m, chunk):  # loop over chunks of ~20k points, not over points
-            stop = min(start + chunk, m)
-            idx = neighbours(start) if pending is None else pending.result()
-            if stop < m:
-                pending = pool.submit(neighbours, stop)
-            # The six entries as columns, xx, yy, zz, xy, xz, yz: no (rows, 3, 3) stack.
-            evals, vec = sym3_eigen_entries(*neighbourhood_covariances(c, idx))
-            evals = np.maximum(evals, 0.0)  # round-off can make the smallest slightly negative
-            total = evals.sum(axis=1)
-            safe = np.where(total > 0, total, 1.0)
-            curvature[start:stop] = np.where(total > 0, evals[:, 0] / safe, 0.0)
-            normals[start:stop] = vec
-    return normals, curvature
+    return neighbours
+
+
+def _centred(points: np.ndarray) -> np.ndarray:
+    """``points`` about the centre of their bounding box.
+
+    So the cancellation in E[pp'] - E[p]E[p]' is about eps * R^2 with R the half-extent of the
+    cloud: 2e-12 m^2 for R = 100 m against neighbourhood variances of 1e-5 m^2 and more (1e-7
+    rad of normal), wherever the cloud lies. Column by column: numpy reduces (N, 3) arrays
+    along axis 0 20x slower than 1-D."""
+    origin = np.array([(points[:, j].min() + points[:, j].max()) / 2.0 for j in range(3)])
+    return points - origin
+
+
+def _chunk_normals(
+    c: np.ndarray, idx: np.ndarray, normals: np.ndarray, curvature: np.ndarray, start: int
+) -> None:
+    """Write the normals and curvatures of the queries ``start:start + len(idx)`` in place.
+
+    c: (N, 3) centred points; idx: (q, k) their neighbours. Each query's neighbourhood
+    covariance is summed as its neighbours are read (compiled: no selection matrix, no
+    gathers)."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.neighbourhoods import neighbourhood_covariances
+
+    stop = start + len(idx)
+    # The six entries as columns, xx, yy, zz, xy, xz, yz: no (rows, 3, 3) stack.
+    evals, vec = sym3_eigen_entries(*neighbourhood_covariances(c, idx))
+    evals = np.maximum(evals, 0.0)  # round-off can make the smallest slightly negative
+    total = evals.sum(axis=1)
+    safe = np.where(total > 0, total, 1.0)
+    curvature[start:stop] = np.where(total > 0, evals[:, 0] / safe, 0.0)
+    normals[start:stop] = vec
 
 
 def _knn_bound(tree: cKDTree, query: np.ndarray, k: int, workers: int) -> float | None:

@@ -26,6 +26,35 @@ def write_pcd(
             f"{name}: unknown PCD data kind {data!r} (expected ascii, binary or binary_compressed)"
         )
     n = xyz.shape[0]
+    columns = _columns(xyz, fields, name)
+    with open(path, "wb") as fh:
+        fh.write(_header(columns, n, data).encode("ascii"))
+        if data == "ascii":
+            _write_ascii(fh, columns, n)
+        elif data == "binary":
+            dt = np.dtype(
+                [(f"{i}", "<" + a.dtype.str[1:], a.shape[1:]) for i, (_, a) in enumerate(columns)]
+            )
+            rec = np.empty(n, dtype=dt)
+            for i, (_, a) in enumerate(columns):
+                rec[f"{i}"] = a
+            fh.write(rec.tobytes())
+        else:
+            blob = b"".join(
+                np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<")).tobytes()
+                for _, a in columns
+            )
+            comp = _lzf.compress_literal(blob)
+            fh.write(struct.pack("<II", len(comp), len(blob)))
+            fh.write(comp)
+
+
+def _columns(
+    xyz: np.ndarray, fields: dict[str, np.ndarray], name: str
+) -> list[tuple[str, np.ndarray]]:
+    """The file's columns: x, y, z, then each field as PCD can hold it (rgb packed in a float32,
+    booleans as uint8, half floats widened); raises CloudFormatError for one it cannot."""
+    n = xyz.shape[0]
     columns: list[tuple[str, np.ndarray]] = [("x", xyz[:, 0]), ("y", xyz[:, 1]), ("z", xyz[:, 2])]
     for fname, arr in fields.items():
         if fname == "rgb" and arr.shape == (n, 3):
@@ -46,11 +75,16 @@ def write_pcd(
         if arr.dtype.kind == "f" and arr.dtype.itemsize < 4:
             arr = arr.astype(np.float32)
         columns.append((fname, arr))
+    return columns
+
+
+def _header(columns: list[tuple[str, np.ndarray]], n: int, data: str) -> str:
+    """The PCD v0.7 header of ``n`` points in ``columns``, stored as ``data``."""
     names = [c[0] for c in columns]
     types = [_KIND_TO_TYPE[a.dtype.kind] for _, a in columns]
     sizes = [a.dtype.itemsize for _, a in columns]
     counts = [1 if a.ndim == 1 else a.shape[1] for _, a in columns]
-    header = (
+    return (
         "# .PCD v0.7 - Point Cloud Data file format\n"
         "VERSION 0.7\n"
         f"FIELDS {' '.join(names)}\n"
@@ -59,26 +93,6 @@ def write_pcd(
         f"COUNT {' '.join(map(str, counts))}\n"
         f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n"
     )
-    with open(path, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        if data == "ascii":
-            _write_ascii(fh, columns, n)
-        elif data == "binary":
-            dt = np.dtype(
-                [(f"{i}", "<" + a.dtype.str[1:], a.shape[1:]) for i, (_, a) in enumerate(columns)]
-            )
-            rec = np.empty(n, dtype=dt)
-            for i, (_, a) in enumerate(columns):
-                rec[f"{i}"] = a
-            fh.write(rec.tobytes())
-        else:
-            blob = b"".join(
-                np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<")).tobytes()
-                for _, a in columns
-            )
-            comp = _lzf.compress_literal(blob)
-            fh.write(struct.pack("<II", len(comp), len(blob)))
-            fh.write(comp)
 
 
 def _write_ascii(fh: Any, columns: list[tuple[str, np.ndarray]], n: int) -> None:

@@ -6,6 +6,7 @@ import importlib
 import threading
 import time
 from collections.abc import Callable, Iterable
+from typing import Any
 
 _WARMERS: list[Callable[[], None]] = []
 _LOCK = threading.Lock()
@@ -31,12 +32,14 @@ def configure(threads: int | None = None) -> str:
     global _configured
     import numba
 
+    # numba.config sets its attributes at import time, from the environment: untyped.
+    config: Any = numba.config
     with _LOCK:
         if not _configured:
-            numba.config.THREADING_LAYER = "threadsafe"
+            config.THREADING_LAYER = "threadsafe"
             _configured = True
         if threads is not None:
-            numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+            numba.set_num_threads(max(1, min(int(threads), config.NUMBA_NUM_THREADS)))
     try:
         return str(numba.threading_layer())
     except ValueError:  # no parallel kernel has run yet

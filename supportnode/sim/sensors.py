@@ -73,9 +73,23 @@ def sample_scene(
         # A bottom face points down in the world when the primitive is not turned over.
         if include_bottoms or not (f.bottom and p.pose[2, 2] > 0.5)
     ]
-    # Visible share of each face from a pilot sample (its own seeded stream), so that hidden
-    # area does not take points away from visible area. Only primitives whose box meets the
-    # face's box can hide part of it.
+    visible, blockers = _visible_shares(scene, faces, seed)
+    areas = np.array([f.area for _, f in faces]) * np.array(visible)
+    counts = rng.multinomial(n_points, areas / areas.sum()) if areas.sum() > 0 else 0 * areas
+    table = scene.label_table()
+    out = empty_cloud(n_points)
+    start = 0
+    for (prim, face), count, share, others in zip(faces, counts, visible, blockers, strict=True):
+        _draw_face(out, slice(start, start + count), prim, face, share, others, rng, table)
+        start += count
+    return out
+
+
+def _visible_shares(scene: Scene, faces: list, seed: int) -> tuple[list[float], list[list]]:
+    """Visible share of each (primitive, face) and the primitives that may hide part of it.
+
+    From a pilot sample (its own seeded stream), so that hidden area does not take points away
+    from visible area. Only primitives whose box meets the face's box can hide part of it."""
     pilot = np.random.default_rng([seed, 1])
     boxes = np.array([p.world_aabb() for p in scene.primitives])  # (P, 2, 3)
     visible, blockers = [], []
@@ -90,30 +104,37 @@ def sample_scene(
         others = [scene.primitives[i] for i in np.flatnonzero(meets)]
         blockers.append(others)
         visible.append(_visible(others, probe).mean())
-    areas = np.array([f.area for _, f in faces]) * np.array(visible)
-    counts = rng.multinomial(n_points, areas / areas.sum()) if areas.sum() > 0 else 0 * areas
-    table = scene.label_table()
-    out = empty_cloud(n_points)
-    start = 0
-    for (prim, face), count, share, others in zip(faces, counts, visible, blockers, strict=True):
-        i = prim.index
-        is_surface = face.top and prim.role == "surface"
-        sl = slice(start, start + count)
-        out.role[sl] = table["role_top"][i] if face.top else table["role_other"][i]
-        out.primitive[sl] = i
-        out.object[sl] = prim.object_id
-        out.surface[sl] = prim.surface_id if is_surface else -1
-        out.supported_by[sl] = table["supported_by"][i]
-        out.support_surface[sl] = table["support_surface"][i]
-        filled = 0
-        while filled < count:  # draw, drop hidden points, draw again for what is missing
-            want = min(_CHUNK, count - filled)
-            pts = _face_points(prim, face, rng, int(want / max(share, 1e-3) * 1.1) + 16)
-            pts = pts[_visible(others, pts)][:want]
-            out.points[start + filled : start + filled + len(pts)] = pts
-            filled += len(pts)
-        start += count
-    return out
+    return visible, blockers
+
+
+def _draw_face(
+    out: SimCloud,
+    sl: slice,
+    prim,
+    face,
+    share: float,
+    others: list,
+    rng: np.random.Generator,
+    table: dict[str, np.ndarray],
+) -> None:
+    """Fill the rows ``sl`` of ``out`` with points drawn on one face, none hidden by
+    ``others``, and their labels; ``share``: the face's visible share."""
+    i = prim.index
+    is_surface = face.top and prim.role == "surface"
+    out.role[sl] = table["role_top"][i] if face.top else table["role_other"][i]
+    out.primitive[sl] = i
+    out.object[sl] = prim.object_id
+    out.surface[sl] = prim.surface_id if is_surface else -1
+    out.supported_by[sl] = table["supported_by"][i]
+    out.support_surface[sl] = table["support_surface"][i]
+    start, count = sl.start, sl.stop - sl.start
+    filled = 0
+    while filled < count:  # draw, drop hidden points, draw again for what is missing
+        want = min(_CHUNK, count - filled)
+        pts = _face_points(prim, face, rng, int(want / max(share, 1e-3) * 1.1) + 16)
+        pts = pts[_visible(others, pts)][:want]
+        out.points[start + filled : start + filled + len(pts)] = pts
+        filled += len(pts)
 
 
 def _face_points(prim, face, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -121,7 +121,7 @@ def test_bad_config_key_names_file_and_line(table_cloud, tmp_path, capsys):
     cfg = _write(tmp_path / "typo.yaml", "surfaces:\n  voxl_size: [0.1, 0.1, 0.1]\n")
     assert main(["detect", str(path), "--config", str(cfg)]) == 2
     err = capsys.readouterr().err
-    assert "typo.yaml:2" in err and "voxel_size" in err
+    assert "typo.yaml:2" in err and "plane_voxel" in err
 
 
 def test_console_command_runs_as_a_process(table_cloud, tmp_path):

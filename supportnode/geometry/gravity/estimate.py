@@ -1,8 +1,8 @@
 """Gravity alignment without an IMU: find the up axis from the scene's planes.
 
 Steps (vectorised or compiled; Python loops run over a handful of families or planes):
-1. Voxel-downsample (``GravityParams.voxel_size``) so every voxel stands for about the same area
-   whatever the sensor density; counts of downsampled normals are then areas.
+1. Voxel-downsample (``GravityParams.downsample_voxel``) so every voxel stands for about the same
+   area whatever the sensor density; counts of downsampled normals are then areas.
 2. k-NN normals of the downsampled points; keep the planar ones (low surface variation).
 3. Plane families: directions on the sphere, n and -n being one axis, where many normals agree.
 4. The up family and its sign (:mod:`.choice`), or with ``up_hint`` the family nearest the
@@ -47,7 +47,7 @@ class GravityEstimate:
     rotation: (3, 3) float64, R such that ``R @ p`` brings the cloud's up to +z (yaw unchanged).
     up: (3,) float64 unit, the up direction in the input frame.
     tilt_deg: angle between ``up`` and the input +z, degrees.
-    inliers: number of downsampled normals (about voxel_size^2 m^2 each) that refined ``up``.
+    inliers: number of downsampled normals (about downsample_voxel^2 m^2 each) that refined ``up``.
     residual_deg: rms angle of those inlier normals to ``up`` after refinement, degrees.
     reason: one line, why this axis and this sign were chosen.
     warning: one line when the result rests on the hint alone (else None).
@@ -98,7 +98,7 @@ def estimate_gravity(
     """Up direction and the rotation to gravity of a cloud, from its planes (no IMU).
 
     points: (N, 3) float metres, any frame; rows with NaN/inf are ignored (organised camera
-    clouds mark missing pixels so). params: voxel_size, inlier_angle_deg, up_hint and
+    clouds mark missing pixels so). params: downsample_voxel, inlier_angle_deg, up_hint and
     hint_cone_deg are used (``enabled`` is the pipeline's switch, not read here).
     sensor_origin: (3,) metres, where the sensor was in this frame; default the origin (true
     for clouds in a camera or lidar frame).
@@ -119,7 +119,7 @@ def estimate_gravity(
     )
     given = np.asarray(params.up_hint, dtype=np.float64).reshape(3)
     hint = given / np.linalg.norm(given) if np.linalg.norm(given) > 0 else None
-    voxel = float(params.voxel_size)
+    voxel = float(params.downsample_voxel)
     counts, ds, covs = voxel_moments(pts, voxel)
     if ds.shape[0] < _K:
         what = f"the finite points fill only {ds.shape[0]} voxels of {voxel} m"
@@ -190,7 +190,7 @@ def _level(
     the sensor's height above the largest plane m); the family's axis when no plane fits."""
     t = (ds[fam.members] - sensor) @ up
     cos_in = np.cos(np.radians(params.inlier_angle_deg))
-    planes = parallel_planes(t, params.voxel_size, ds.shape[0])
+    planes = parallel_planes(t, params.downsample_voxel, ds.shape[0])
     height = -max(planes, key=lambda p: int(p[1].sum()))[0] if planes else float("nan")
     fits = []
     for _, m in planes:

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from supportnode.errors import InputError
-from supportnode.geometry.surfaces.band import (
-    drop_raised,
-    label_in_band,
-    label_ring,
-)
+from supportnode.geometry.surfaces.band import Band, drop_raised, label_in_band, label_ring
 from supportnode.geometry.surfaces.clutter import (
     _absorb_clutter,
     _reject_tilted_clutter,
@@ -22,6 +20,7 @@ from supportnode.geometry.surfaces.planar import (
     _connect,
     _filter_components,
     _grow_planar,
+    _Planes,
     _surface_tolerance,
 )
 from supportnode.geometry.surfaces.result import SurfaceResult
@@ -44,71 +43,35 @@ def detect_surfaces(
     """
     params = params or SurfaceParams()
     pts = _check_points(points)
-    size = np.asarray(params.voxel_size, dtype=np.float64)
+    size = np.asarray(params.plane_voxel, dtype=np.float64)
     keep = None
     if params.normal_filter and len(pts):
         keep = _normal_filter_mask(pts, params)
     used = pts if keep is None else pts[keep]
     grid = voxelize(used, size)
     # Point labels are kept in the grid's voxel order (contiguous per voxel) until the end.
+    widths: dict[bytes, float] | None = None
+    planar: _PlanarState | None = None
     if params.method == "seed":
         surface_of_voxel, stats = _grow_seed(grid, params)
         sorted_labels = np.repeat(surface_of_voxel, grid.counts)
     elif params.method == "planar":
-        index = KeyIndex.build(grid.keys)
-        surface_of_voxel, planes, stats = _grow_planar(grid, index, params)
-        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
-        absorbed = _absorb_clutter(grid, index, surface_of_voxel, planes, tolerance, params)
-        stats["absorbed_voxels"] = len(absorbed)
-        # Pieces of one board, split by the objects on it, meet once grown around them.
-        sv = np.flatnonzero(surface_of_voxel >= 0)
-        edges: list = []
-        if len(sv):
-            surface_of_voxel[sv] = _connect(
-                grid, index, sv, planes.mean[sv], planes.normal[sv], params, edges=edges
-            )
-            tolerance = _surface_tolerance(surface_of_voxel, planes, params)
-        # Size limits apply to what a surface became: a board seen between objects is a
-        # narrow strip until it has grown under and around them.
-        widths: dict[bytes, float] = {}
-        stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params, widths)
-        # A cutting board or a plate joins the worktop it lies on: cut it out again.
-        stats["plateau_voxels"] = (
-            _drop_raised_plateaus(grid, surface_of_voxel, planes, tolerance, sv, *edges, params)
-            if edges
-            else 0
+        widths = {}
+        surface_of_voxel, sorted_labels, stats, planar = _label_planar(
+            grid, params, widths, sensor_origin
         )
-        sorted_labels, best, band = label_in_band(
-            grid, index, surface_of_voxel, planes, tolerance, sensor_origin, params
-        )
-        by_band = None
-        if band is not None:
-            by_band = band.by_band
-            stats["band_surfaces"] = int(by_band.sum())
-            stats["raised_points"] = drop_raised(grid, sorted_labels, best, band, 0.01)
-        if params.clutter_normal_k > 0:
-            vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
-            if by_band is not None:
-                vetted = vetted[~by_band[surface_of_voxel[vetted].clip(0)]]
-            stats["clutter_points_rejected"] = _reject_tilted_clutter(
-                grid, index, sorted_labels, vetted, params
-            )
     else:
         raise InputError(f"unknown surface method '{params.method}' (expected seed or planar)")
     # Surface ids by the points' labels so far (lut[label], -1 for -1): one gather of all
     # points at the end, not one a stage.
-    surfaces, lut = _summarise(
-        grid, sorted_labels, surface_of_voxel, params, widths if params.method == "planar" else None
-    )
-    if params.method == "planar":
+    surfaces, lut = _summarise(grid, sorted_labels, surface_of_voxel, params, widths)
+    if planar is not None:
         surfaces, lut = _drop_unfit(grid, surfaces, sorted_labels, lut, params, sensor_origin)
-        if band is not None and surfaces:
-            _fill_ring(
-                grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces, by_band
-            )
-            _note_noise(surfaces, band, lut)
+        if planar.band is not None and surfaces:
+            _fill_ring(grid, surface_of_voxel, sorted_labels, lut, surfaces, planar)
+            _note_noise(surfaces, planar.band, lut)
     # Outlines only of the surfaces kept, all traced together.
-    cell_size = (float(params.voxel_size[0]), float(params.voxel_size[1]))
+    cell_size = (float(params.plane_voxel[0]), float(params.plane_voxel[1]))
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
     for s, outline in zip(surfaces, outlines, strict=True):
         s.outline = outline
@@ -123,6 +86,112 @@ def detect_surfaces(
     if keep is not None:
         stats["normal_filter_removed"] = int(len(pts) - keep.sum())
     return SurfaceResult(surfaces=surfaces, labels=labels, stats=stats)
+
+
+@dataclass
+class _PlanarState:
+    """What the planar method's last steps (after the surfaces' summaries) continue from."""
+
+    index: KeyIndex
+    planes: _Planes
+    best: np.ndarray  # (N,) each labelled point's height above its plane, grid order, m
+    band: Band | None
+
+
+def _label_planar(
+    grid: VoxelGrid,
+    params: SurfaceParams,
+    widths: dict[bytes, float],
+    sensor_origin: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, dict, _PlanarState]:
+    """The planar method's surface of each voxel, label of each point (grid order), stats,
+    and the state its last steps need.
+
+    Grows level voxels into surfaces, absorbs the clutter around them, joins the pieces they
+    meet, applies the size limits (footprint widths measured go into ``widths``), cuts raised
+    plateaus out and labels the points: within each surface's noise band where that decides
+    (a depth camera's; raised patches of the band then leave it), else within its tolerance,
+    the points admitted in cluttered voxels vetted by their normals."""
+    index = KeyIndex.build(grid.keys)
+    surface_of_voxel, planes, stats = _grow_planar(grid, index, params)
+    tolerance = _surface_tolerance(surface_of_voxel, planes, params)
+    absorbed = _absorb_clutter(grid, index, surface_of_voxel, planes, tolerance, params)
+    stats["absorbed_voxels"] = len(absorbed)
+    # Pieces of one board, split by the objects on it, meet once grown around them.
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    edges: list[np.ndarray] = []
+    if len(sv):
+        surface_of_voxel[sv] = _connect(
+            grid, index, sv, planes.mean[sv], planes.normal[sv], params, edges=edges
+        )
+        tolerance = _surface_tolerance(surface_of_voxel, planes, params)
+    # Size limits apply to what a surface became: a board seen between objects is a
+    # narrow strip until it has grown under and around them.
+    stats["rejected_narrow"] = _filter_components(grid, surface_of_voxel, params, widths)
+    # A cutting board or a plate joins the worktop it lies on: cut it out again.
+    stats["plateau_voxels"] = 0
+    if edges:
+        src, dst = edges  # the pairs of sv that _connect joined
+        stats["plateau_voxels"] = _drop_raised_plateaus(
+            grid, surface_of_voxel, planes, tolerance, sv, src, dst, params
+        )
+    sorted_labels, best, band = label_in_band(
+        grid, index, surface_of_voxel, planes, tolerance, sensor_origin, params
+    )
+    if band is not None:
+        stats["band_surfaces"] = int(band.by_band.sum())
+        stats["raised_points"] = drop_raised(grid, sorted_labels, best, band, _RAISED_CELL)
+    if params.clutter_normal_k > 0:
+        vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
+        if band is not None:
+            vetted = vetted[~band.by_band[surface_of_voxel[vetted].clip(0)]]
+        stats["clutter_points_rejected"] = _reject_tilted_clutter(
+            grid, index, sorted_labels, vetted, params
+        )
+    return surface_of_voxel, sorted_labels, stats, _PlanarState(index, planes, best, band)
+
+
+# Columns of this width, metres, average a band's heights for raised patches (drop_raised).
+_RAISED_CELL = 0.01
+
+
+def _fill_ring(
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    sorted_labels: np.ndarray,
+    lut: np.ndarray,
+    surfaces: list,
+    planar: _PlanarState,
+) -> None:
+    """The band's ring pass (:func:`label_ring`) for the surfaces kept whose points the band
+    decides; their point counts follow. lut: component -> surface id (last entry: -1)."""
+    band = planar.band
+    assert band is not None
+    n_comp = int(surface_of_voxel.max()) + 1
+    m = min(n_comp, len(lut) - 1)
+    kept = np.zeros(n_comp, dtype=bool)
+    kept[:m] = lut[:m] >= 0
+    kept &= band.by_band[:n_comp]
+    if not kept.any():
+        return
+    added = label_ring(
+        grid, planar.index, surface_of_voxel, kept, planar.planes, sorted_labels, planar.best, band
+    )
+    for comp in np.flatnonzero(added):
+        surfaces[lut[comp]].point_count += int(added[comp])
+
+
+def _note_noise(surfaces: list, band: Band, lut: np.ndarray) -> None:
+    """Each surface's measured noise, and the band (or tolerance) that labelled it."""
+    for comp in range(min(len(band.model.a), len(lut) - 1)):
+        if lut[comp] >= 0:
+            s = surfaces[lut[comp]]
+            s.noise = (float(band.model.a[comp]), float(band.model.b[comp]))
+            s.band = (
+                (band.sigmas, band.floor)
+                if band.by_band[comp]
+                else (0.0, float(band.tolerance[comp]))
+            )
 
 
 def _check_points(points: np.ndarray) -> np.ndarray:
@@ -140,7 +209,7 @@ def _normal_filter_mask(pts: np.ndarray, params: SurfaceParams) -> np.ndarray:
     candidates are points in voxels that pass p_min; others cannot be surface points anyway."""
     from supportnode.geometry.normals import filter_vertical_normals
 
-    grid = voxelize(pts, np.asarray(params.voxel_size, dtype=np.float64))
+    grid = voxelize(pts, np.asarray(params.plane_voxel, dtype=np.float64))
     candidate = (grid.counts > params.p_min)[grid.point_voxel]
     return (
         filter_vertical_normals(
@@ -162,33 +231,3 @@ def _grow_seed(grid: VoxelGrid, params: SurfaceParams) -> tuple[np.ndarray, dict
     surface_of_voxel = np.full(len(grid.counts), -1, dtype=np.int64)
     surface_of_voxel[occupied[good]] = comp[good]
     return surface_of_voxel, {"occupied_voxels": len(occupied)}
-
-
-def _fill_ring(
-    grid, index, surface_of_voxel, planes, sorted_labels, best, band, lut, surfaces, by_band
-):
-    """The band's ring pass (:func:`label_ring`) for the surfaces kept whose points the band
-    decides (``by_band``: (C,) per component); their point counts follow."""
-    n_comp = int(surface_of_voxel.max()) + 1
-    m = min(n_comp, len(lut) - 1)  # lut's last entry maps -1
-    kept = np.zeros(n_comp, dtype=bool)
-    kept[:m] = lut[:m] >= 0
-    kept &= by_band[:n_comp]
-    if not kept.any():
-        return
-    added = label_ring(grid, index, surface_of_voxel, kept, planes, sorted_labels, best, band)
-    for comp in np.flatnonzero(added):
-        surfaces[lut[comp]].point_count += int(added[comp])
-
-
-def _note_noise(surfaces, band, lut) -> None:
-    """Each surface's measured noise and band, from its component's."""
-    for comp in range(min(len(band.model.a), len(lut) - 1)):
-        if lut[comp] >= 0:
-            s = surfaces[lut[comp]]
-            s.noise = (float(band.model.a[comp]), float(band.model.b[comp]))
-            s.band = (
-                (band.sigmas, band.floor)
-                if band.by_band[comp]
-                else (0.0, float(band.tolerance[comp]))
-            )

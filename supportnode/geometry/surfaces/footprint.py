@@ -118,57 +118,15 @@ def cells_outlines(
     if not full:
         return out
     cells_list = [cells_list[i] for i in full]
-    # Directed boundary edges with the surface on their left, in vertex coordinates (x, y)
-    # of each footprint's own raster, ordered as one footprint's edges alone would be: by
-    # footprint, then side, then row and column.
-    # (np.roll wraps around, onto the empty border of a raster.)
-    sides = (
-        (0, 1, lambda x, y: (x, y, x + 1, y)),  # nothing below: bottom edge
-        (1, -1, lambda x, y: (x + 1, y, x + 1, y + 1)),  # nothing right
-        (0, -1, lambda x, y: (x + 1, y + 1, x, y + 1)),  # nothing above
-        (1, 1, lambda x, y: (x, y + 1, x, y)),  # nothing left
-    )
-    edges, owner = [], []
-    for members, filled, first_row in _stacked_rasters(cells_list, upsample=1):
-        for side, (axis, shift, edge) in enumerate(sides):
-            jy, ix = np.nonzero(filled & ~np.roll(filled, shift, axis=axis))
-            m = np.searchsorted(first_row, jy, side="right") - 1
-            edges.append(np.stack(edge(ix, jy - first_row[m]), 1))
-            owner.append(members[m] * 4 + side)
-    owner = np.concatenate(owner)
-    by = np.argsort(owner, kind="stable")
-    e = np.concatenate(edges)[by]
-    owner = owner[by] // 4
+    e, owner = _boundary_edges(cells_list)
     nxt = _next_edge(e, owner)
     n = len(e)
     ring = _components(n, np.arange(n), nxt)
-    # Walk order without walking: cut each ring after its smallest edge index, then rank every
-    # edge by its distance to the cut (pointer jumping: log2(E) vectorised rounds).
-    n_rings = int(ring.max()) + 1
-    root = np.full(n_rings, n, dtype=np.int64)
-    np.minimum.at(root, ring, np.arange(n))
-    succ = np.where(nxt == root[ring], -1, nxt)
-    dist = (succ >= 0).astype(np.int64)
-    for _ in range(int(np.ceil(np.log2(n + 1))) + 1):  # list ranking: log2(E) rounds suffice
-        if not (succ >= 0).any():
-            break
-        ok = succ >= 0
-        hop = np.maximum(succ, 0)
-        dist = dist + np.where(ok, dist[hop], 0)
-        succ = np.where(ok, succ[hop], -1)
-    order = np.lexsort((-dist, ring))
+    order, root = _walk_order(ring, nxt)
+    n_rings = len(root)
     bounds = np.searchsorted(ring[order], np.arange(n_rings + 1))
-    # Collinear vertices dropped (the cross product of the edges in and out is exact on
-    # integers), every ring at once: its previous and next vertex wrap around within it.
     v = e[order, :2].astype(np.float64)
-    ring_of = ring[order]
-    at = np.arange(n)
-    prev = np.where(at == bounds[ring_of], bounds[ring_of + 1] - 1, at - 1)
-    after = np.where(at == bounds[ring_of + 1] - 1, bounds[ring_of], at + 1)
-    cross = (v[:, 0] - v[prev, 0]) * (v[after, 1] - v[:, 1]) - (v[:, 1] - v[prev, 1]) * (
-        v[after, 0] - v[:, 0]
-    )
-    keep = cross != 0
+    keep = _turns(v, ring[order], bounds)
     origin = np.stack([c.min(axis=0) for c in cells_list]).astype(np.int64) - 1
     v = (v + origin[owner[order]]) * np.asarray(cell_size)
     kept_bounds = np.r_[0, np.cumsum(np.add.reduceat(keep, bounds[:-1]))]
@@ -181,6 +139,67 @@ def cells_outlines(
             rings.sort(key=lambda r: -abs(_ring_area(r)))
         out[i] = rings
     return out
+
+
+def _boundary_edges(cells_list: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Directed boundary edges (E, 4: x0 y0 x1 y1) of non-empty footprints, and the footprint
+    of each (E,).
+
+    The surface is on an edge's left; vertex coordinates are those of each footprint's own
+    raster; the edges are ordered as one footprint's edges alone would be: by footprint, then
+    side, then row and column. (np.roll wraps around, onto the empty border of a raster.)"""
+    sides = (
+        (0, 1, lambda x, y: (x, y, x + 1, y)),  # nothing below: bottom edge
+        (1, -1, lambda x, y: (x + 1, y, x + 1, y + 1)),  # nothing right
+        (0, -1, lambda x, y: (x + 1, y + 1, x, y + 1)),  # nothing above
+        (1, 1, lambda x, y: (x, y + 1, x, y)),  # nothing left
+    )
+    edges, owners = [], []
+    for members, filled, first_row in _stacked_rasters(cells_list, upsample=1):
+        for side, (axis, shift, edge) in enumerate(sides):
+            jy, ix = np.nonzero(filled & ~np.roll(filled, shift, axis=axis))
+            m = np.searchsorted(first_row, jy, side="right") - 1
+            edges.append(np.stack(edge(ix, jy - first_row[m]), 1))
+            owners.append(members[m] * 4 + side)
+    owner = np.concatenate(owners)
+    by = np.argsort(owner, kind="stable")
+    return np.concatenate(edges)[by], owner[by] // 4
+
+
+def _walk_order(ring: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The edges in walk order, ring after ring, and each ring's first edge (its smallest
+    index).
+
+    Walk order without walking: cut each ring after its smallest edge index, then rank every
+    edge by its distance to the cut (pointer jumping: log2(E) vectorised rounds)."""
+    n = len(nxt)
+    n_rings = int(ring.max()) + 1
+    root = np.full(n_rings, n, dtype=np.int64)
+    np.minimum.at(root, ring, np.arange(n))
+    succ = np.where(nxt == root[ring], -1, nxt)
+    dist = (succ >= 0).astype(np.int64)
+    for _ in range(int(np.ceil(np.log2(n + 1))) + 1):  # list ranking: log2(E) rounds suffice
+        if not (succ >= 0).any():
+            break
+        ok = succ >= 0
+        hop = np.maximum(succ, 0)
+        dist = dist + np.where(ok, dist[hop], 0)
+        succ = np.where(ok, succ[hop], -1)
+    return np.lexsort((-dist, ring)), root
+
+
+def _turns(v: np.ndarray, ring_of: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(E,) bool: the vertices ``v`` (E, 2) where their ring turns (collinear ones dropped).
+
+    The cross product of the edges in and out is exact on integers; every ring at once: its
+    previous and next vertex wrap around within it (``bounds``: each ring's first index)."""
+    at = np.arange(len(v))
+    prev = np.where(at == bounds[ring_of], bounds[ring_of + 1] - 1, at - 1)
+    after = np.where(at == bounds[ring_of + 1] - 1, bounds[ring_of], at + 1)
+    cross = (v[:, 0] - v[prev, 0]) * (v[after, 1] - v[:, 1]) - (v[:, 1] - v[prev, 1]) * (
+        v[after, 0] - v[:, 0]
+    )
+    return cross != 0
 
 
 def _next_edge(e: np.ndarray, owner: np.ndarray) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen
@@ -9,6 +11,36 @@ from supportnode.geometry.surfaces.footprint import _cells_key, footprint_widths
 from supportnode.geometry.surfaces.result import Surface
 from supportnode.geometry.voxels import OUTER_INDEX, VoxelGrid
 from supportnode.params import SurfaceParams
+
+
+class _Runs(NamedTuple):
+    """Runs of points of one (voxel, surface), the unit the surfaces' sums are taken over.
+
+    g: (R,) surface index; vox: (R,) voxel index; n: (R,) points; corner: (R, 3) m, the voxel's
+    corner; sum (R, 3), outer (R, 6): moments relative to the corner (``OUTER_INDEX`` order);
+    lo, hi: (R, 3) m, the run's extremes."""
+
+    g: np.ndarray
+    vox: np.ndarray
+    n: np.ndarray
+    corner: np.ndarray
+    sum: np.ndarray
+    outer: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+class _Moments(NamedTuple):
+    """Per surface (S,): point count (float), centroid (S, 3), upward unit normal (S, 3),
+    flatness (rms distance to the plane, m), box (S, 3) and median height (m)."""
+
+    counts: np.ndarray
+    centroid: np.ndarray
+    normal: np.ndarray
+    flatness: np.ndarray
+    bmin: np.ndarray
+    bmax: np.ndarray
+    height: np.ndarray
 
 
 def _summarise(
@@ -24,9 +56,6 @@ def _summarise(
     returns the surfaces and each component's surface id: ``lut[sorted_labels]`` (int32,
     its last entry -1 for the points on none). widths: footprint widths already
     measured, by ``_cells_key`` of the footprint (see :func:`_filter_components`)."""
-    # Imported here: importing the geometry (as the wire's types do) must not load numba.
-    from supportnode.kernels.runs import range_extremes, run_moments
-
     at = np.flatnonzero(sorted_labels >= 0)
     if len(at) == 0:
         return [], np.full(1, -1, dtype=np.int32)
@@ -36,11 +65,70 @@ def _summarise(
     s_count = len(comps)
     remap = np.full(len(present) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
     remap[comps] = np.arange(s_count)
-    # Runs of one (voxel, surface) are reduced first; surfaces are then sums over their runs.
-    # Most surface voxels hold points of one surface only: their run is the whole voxel, whose
-    # moments the grid already has. Only mixed voxels are reduced point by point.
-    # Only the labelled points are read (a few of all): a voxel is pure when all its points
-    # are labelled, with one surface.
+    runs = _runs(grid, sorted_labels, at, lab, remap)
+    mom = _moments(runs, s_count)
+    counts = mom.counts.astype(np.int64)
+    vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
+    vx, vy = float(params.plane_voxel[0]), float(params.plane_voxel[1])
+    area, cells_of = _footprint_areas(
+        grid.keys[runs.vox, :2], runs.g, runs.lo[:, :2], runs.hi[:, :2], runs.n, s_count, (vx, vy)
+    )
+
+    rank = np.lexsort((mom.centroid[:, 1], mom.centroid[:, 0], mom.height, -counts, -area))
+    new_id = np.empty(s_count, dtype=np.int64)
+    new_id[rank] = np.arange(s_count)
+    width = _widths(cells_of, widths, (vx, vy))
+    surfaces = []
+    for sid, c in enumerate(rank):  # one entry per surface
+        surfaces.append(
+            Surface(
+                id=sid,
+                height=float(mom.height[c]),
+                area=float(area[c]),
+                centroid=mom.centroid[c],
+                normal=mom.normal[c],
+                flatness=float(mom.flatness[c]),
+                bbox_min=mom.bmin[c],
+                bbox_max=mom.bmax[c],
+                outline=[],  # traced once the surface is kept (detect_surfaces)
+                point_count=int(counts[c]),
+                voxel_count=int(vcount[c]),
+                cells=cells_of[c],
+                cell_size=(vx, vy),
+                width=float(width[c]),
+            )
+        )
+    new_id = np.append(new_id, -1).astype(np.int32)
+    return surfaces, new_id[remap]
+
+
+def _widths(
+    cells_of: list[np.ndarray], known: dict[bytes, float] | None, cell_size: tuple[float, float]
+) -> np.ndarray:
+    """The footprint width (m) of each footprint's cells, reusing those ``known`` by key."""
+    width = np.array([-1.0 if known is None else known.get(_cells_key(c), -1.0) for c in cells_of])
+    todo = np.flatnonzero(width < 0)
+    if len(todo):
+        width[todo] = footprint_widths([cells_of[i] for i in todo], cell_size)
+    return width
+
+
+def _runs(
+    grid: VoxelGrid,
+    sorted_labels: np.ndarray,
+    at: np.ndarray,
+    lab: np.ndarray,
+    remap: np.ndarray,
+) -> _Runs:
+    """The runs of one (voxel, surface) of the labelled points ``at`` (labels ``lab``).
+
+    Most surface voxels hold points of one surface only: their run is the whole voxel, whose
+    moments the grid already has. Only mixed voxels are reduced point by point. Only the
+    labelled points are read (a few of all): a voxel is pure when all its points are labelled,
+    with one surface. Pure voxels' runs come first, then the mixed runs."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.runs import range_extremes, run_moments
+
     at_vox = np.searchsorted(grid.starts, at, side="right") - 1
     first = np.flatnonzero(np.r_[True, at_vox[1:] != at_vox[:-1]])
     vv = at_vox[first]
@@ -58,17 +146,25 @@ def _summarise(
     run = np.flatnonzero(cut)
     # The mixed runs' moments and extremes read in place (compiled: no gathered columns).
     m_sum, m_outer, m_min, m_max = run_moments(grid.local, at[mixed], run)
-    run_g = np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], g[run]])
     run_vox = np.concatenate([pure_vox, vox[run]])
-    run_n = np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))])
     corner = grid.keys[run_vox] * grid.size
-    r_sum = np.concatenate([grid.sums[pure_vox], m_sum])
-    r_outer = np.concatenate([grid.outer[pure_vox], m_outer])
     # Extremes of the pure voxels from their own points (all of the voxel's).
     v_min, v_max = range_extremes(grid.local, grid.starts[pure_vox], grid.counts[pure_vox])
-    r_min = np.concatenate([v_min, m_min]) + corner
-    r_max = np.concatenate([v_max, m_max]) + corner
+    return _Runs(
+        g=np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], g[run]]),
+        vox=run_vox,
+        n=np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))]),
+        corner=corner,
+        sum=np.concatenate([grid.sums[pure_vox], m_sum]),
+        outer=np.concatenate([grid.outer[pure_vox], m_outer]),
+        lo=np.concatenate([v_min, m_min]) + corner,
+        hi=np.concatenate([v_max, m_max]) + corner,
+    )
 
+
+def _moments(runs: _Runs, s_count: int) -> _Moments:
+    """Each surface's sums over its runs: count, centroid, plane, flatness, box, height."""
+    run_g, run_n, corner, r_sum = runs.g, runs.n, runs.corner, runs.sum
     counts = np.bincount(run_g, weights=run_n, minlength=s_count)
     abs_sum = r_sum + corner * run_n[:, None]
     centroid = (
@@ -82,7 +178,7 @@ def _summarise(
     cov = np.empty((s_count, 3, 3))
     for col, (a, b) in enumerate(OUTER_INDEX):
         m = (
-            r_outer[:, col]
+            runs.outer[:, col]
             + shift[:, a] * r_sum[:, b]
             + shift[:, b] * r_sum[:, a]
             + run_n * shift[:, a] * shift[:, b]
@@ -93,52 +189,12 @@ def _summarise(
     flatness = np.sqrt(np.maximum(evals[:, 0], 0.0))
     bmin = np.full((s_count, 3), np.inf)
     bmax = np.full((s_count, 3), -np.inf)
-    np.minimum.at(bmin, run_g, r_min)
-    np.maximum.at(bmax, run_g, r_max)
+    np.minimum.at(bmin, run_g, runs.lo)
+    np.maximum.at(bmax, run_g, runs.hi)
     # Height: the median of z, taken over runs weighted by their points (a run is one voxel's
     # share of a level surface, so its mean z stands for its points to within the roughness).
     height = _weighted_median(abs_sum[:, 2] / run_n, run_n, run_g, s_count)
-    counts = counts.astype(np.int64)
-    vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
-    run_xy_min, run_xy_max = r_min[:, :2], r_max[:, :2]
-    run_cells = grid.keys[run_vox, :2]
-    vx, vy = float(params.voxel_size[0]), float(params.voxel_size[1])
-    area, cells_of = _footprint_areas(
-        run_cells, run_g, run_xy_min, run_xy_max, run_n, s_count, (vx, vy)
-    )
-
-    rank = np.lexsort((centroid[:, 1], centroid[:, 0], height, -counts, -area))
-    new_id = np.empty(s_count, dtype=np.int64)
-    new_id[rank] = np.arange(s_count)
-    width = np.array(
-        [-1.0 if widths is None else widths.get(_cells_key(c), -1.0) for c in cells_of]
-    )
-    todo = np.flatnonzero(width < 0)
-    if len(todo):
-        width[todo] = footprint_widths([cells_of[i] for i in todo], (vx, vy))
-    surfaces = []
-    for sid, c in enumerate(rank):  # one entry per surface
-        cells = cells_of[c]
-        surfaces.append(
-            Surface(
-                id=sid,
-                height=float(height[c]),
-                area=float(area[c]),
-                centroid=centroid[c],
-                normal=normal[c],
-                flatness=float(flatness[c]),
-                bbox_min=bmin[c],
-                bbox_max=bmax[c],
-                outline=[],  # traced once the surface is kept (detect_surfaces)
-                point_count=int(counts[c]),
-                voxel_count=int(vcount[c]),
-                cells=cells,
-                cell_size=(vx, vy),
-                width=float(width[c]),
-            )
-        )
-    new_id = np.append(new_id, -1).astype(np.int32)
-    return surfaces, new_id[remap]
+    return _Moments(counts, centroid, normal, flatness, bmin, bmax, height)
 
 
 def _weighted_median(

@@ -1,22 +1,13 @@
-"""Typed parameters of the geometry, one frozen dataclass per stage.
+"""Parameters of the detection: surfaces, objects, free space, gravity alignment, the safe rule.
 
-Each field carries metadata used by `supportnode.config` to document, parse and range-check it:
-``unit`` (SI unit or ``""``), ``help`` (one line), and optional ``min`` / ``max`` (inclusive) or
-``choices``. Defaults here are the built-in defaults (lowest precedence: defaults < YAML < --set).
+One frozen dataclass per stage; each is a section of the configuration (see `supportnode.params`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
-
-def param(default: Any, help: str, unit: str = "", **limits: Any) -> Any:
-    """A dataclass field with documentation and limits for the configuration loader."""
-    meta = {"help": help, "unit": unit, **limits}
-    if isinstance(default, (list, tuple)):
-        return field(default_factory=lambda: tuple(default), metadata=meta)
-    return field(default=default, metadata=meta)
+from supportnode.params.base import param
 
 
 @dataclass(frozen=True)
@@ -29,8 +20,14 @@ class SurfaceParams:
         "growth across height layers, area and width limits",
         choices=("seed", "planar"),
     )
-    voxel_size: tuple[float, float, float] = param(
-        (0.1, 0.1, 0.05), "voxel edge lengths vx, vy, vz", "m", min=1e-3, max=10.0
+    plane_voxel: tuple[float, float, float] = param(
+        (0.1, 0.1, 0.05),
+        "edge lengths vx, vy, vz of the voxels surfaces are built from (seed: occupied voxels "
+        "grown into regions; planar: one plane fit per voxel); a surface's footprint cells are "
+        "vx by vy",
+        "m",
+        min=1e-3,
+        max=10.0,
     )
     p_min: int = param(2, "a voxel counts only if it holds MORE than p_min points", min=0)
     psi_min: int = param(
@@ -151,6 +148,15 @@ class SurfaceParams:
         min=0.0,
     )
 
+    @property
+    def voxel_size(self) -> tuple[float, float, float]:
+        """`plane_voxel` under its name before 0.2 (the key ``surfaces.voxel_size`` is an error).
+
+        Read only by code being rewritten elsewhere (geometry/surfaces/planar.py, clutter.py);
+        goes once they read ``plane_voxel``.
+        """
+        return self.plane_voxel
+
 
 @dataclass(frozen=True)
 class ObjectParams:
@@ -175,7 +181,15 @@ class ObjectParams:
         "m",
         min=0.0,
     )
-    voxel_size: float = param(0.03, "voxel: edge of the fine grid", "m", min=1e-3, max=1.0)
+    cluster_cell: float = param(
+        0.03,
+        "voxel: occupied cells of this edge that touch (26-neighbours) are one cluster; "
+        "splitting touching objects rasters their footprints at a third of it, their tops and "
+        "creases at it",
+        "m",
+        min=1e-3,
+        max=1.0,
+    )
     min_points: int = param(30, "smallest cluster kept (smaller ones are noise)", min=1)
     support_tolerance: float = param(
         0.05,
@@ -232,6 +246,15 @@ class ObjectParams:
         max=2.0,
     )
 
+    @property
+    def voxel_size(self) -> float:
+        """`cluster_cell` under its name before 0.2 (the key ``objects.voxel_size`` is an error).
+
+        Read only by code being rewritten elsewhere (geometry/objects/); goes once it reads
+        ``cluster_cell``.
+        """
+        return self.cluster_cell
+
 
 @dataclass(frozen=True)
 class FreeSpaceParams:
@@ -259,7 +282,14 @@ class GravityParams:
         min=1.0,
         max=90.0,
     )
-    voxel_size: float = param(0.05, "grid for the normals used by alignment", "m", min=1e-3)
+    downsample_voxel: float = param(
+        0.05,
+        "the cloud is thinned to one point per voxel of this edge before its normals are "
+        "estimated (counts of normals are then areas); also the height bin that tells parallel "
+        "planes apart",
+        "m",
+        min=1e-3,
+    )
     inlier_angle_deg: float = param(
         10.0, "normals within this of the up direction refine it", "deg", min=0.1, max=45.0
     )
@@ -275,143 +305,4 @@ class SafeParams:
     )
     max_tilt_deg: float = param(
         5.0, "largest angle between its normal and up", "deg", min=0.0, max=90.0
-    )
-
-
-@dataclass(frozen=True)
-class DetectParams:
-    """Everything `supportnode detect` and the node's detection stage use."""
-
-    surfaces: SurfaceParams = field(default_factory=SurfaceParams)
-    objects: ObjectParams = field(default_factory=ObjectParams)
-    freespace: FreeSpaceParams = field(default_factory=FreeSpaceParams)
-    gravity: GravityParams = field(default_factory=GravityParams)
-    safe: SafeParams = field(default_factory=SafeParams)
-    # A lambda because NodeParams is defined below (appended sections keep this file's order).
-    node: NodeParams = field(default_factory=lambda: NodeParams())
-
-
-@dataclass(frozen=True)
-class MapParams:
-    """The node's incremental voxel map: posed scans merged, aged, cropped around the sensor."""
-
-    radius: float = param(
-        20.0, "keep only voxels within this horizontal distance of the sensor", "m", min=0.1
-    )
-    max_age: float = param(
-        10.0, "forget voxels not seen for this long (0: never by age)", "s", min=0.0
-    )
-    max_voxels: int = param(
-        2_000_000, "cap on stored voxels; the oldest go first beyond it", min=1000
-    )
-    voxel_size: float = param(0.05, "edge of the map's voxels", "m", min=1e-3, max=1.0)
-    clear_free_space: bool = param(
-        True, "erase voxels that a new ray passes through (moved or removed objects)"
-    )
-
-
-@dataclass(frozen=True)
-class NodeParams:
-    """The ZeroMQ node: endpoints, topics, rates, input limits and its map.
-
-    Endpoints are ZeroMQ addresses (tcp://host:port, ipc://path, inproc://name). Like a ROS
-    topic fed by a sensor driver, the driver (or replay) binds its PUB socket and the node
-    connects to it (scan_bind: false); the node binds the PUB socket its results go out on, and
-    planners connect to it.
-    """
-
-    name: str = param("supportnode", "node name used in logs and diagnostics")
-    scan_endpoint: str = param(
-        "tcp://127.0.0.1:5555", "where the node subscribes to scans (a driver's PUB socket)"
-    )
-    scan_bind: bool = param(
-        False, "bind the scan socket instead of connecting (when drivers connect to the node)"
-    )
-    scan_topic: str = param("scan", "topic of incoming PointCloud messages")
-    pub_endpoint: str = param(
-        "tcp://127.0.0.1:5556", "where the node publishes results (planners connect here)"
-    )
-    pub_bind: bool = param(True, "bind the result socket (false: connect to a forwarder)")
-    surfaces_topic: str = param("surfaces", "topic of outgoing SupportSurfaces messages")
-    obstacles_topic: str = param("obstacles", "topic of outgoing ObstacleClusters messages")
-    diagnostics_topic: str = param("diagnostics", "topic of outgoing Diagnostics messages")
-    detection_rate: float = param(
-        0.0,
-        "largest detection rate; scans in between only update the map (0: every scan)",
-        "Hz",
-        min=0.0,
-        max=1000.0,
-    )
-    diagnostics_period: float = param(
-        1.0, "time between Diagnostics messages", "s", min=0.01, max=3600.0
-    )
-    map_topic: str = param(
-        "map", "topic of the map as a PointCloud (one point per voxel, results' frame)"
-    )
-    map_period: float = param(
-        1.0, "time between map messages (0: never publish the map)", "s", min=0.0, max=3600.0
-    )
-    threads: int = param(
-        0,
-        "threads of the compiled kernels' parallel loops (0: numba's default, every core; the "
-        "node shares the cores with SLAM and the driver)",
-        min=0,
-        max=256,
-    )
-    safe_min_hits: int = param(
-        2,
-        "a surface is safe only once seen in this many detections in a row under one id "
-        "(and the safe section's rules hold)",
-        min=1,
-    )
-    max_points: int = param(4_000_000, "scans with more points are rejected", min=1)
-    max_message_bytes: int = param(
-        64 * 1024 * 1024, "messages larger than this many bytes are rejected", min=1024
-    )
-    reject_log_period: float = param(
-        5.0,
-        "at most one log line per this period about rejected messages (and per kind of "
-        "internal error)",
-        "s",
-        min=0.0,
-    )
-    max_stamp_jump: float = param(
-        30.0,
-        "a scan stamped more than this after the previous one, or before it, is rejected "
-        "(stamp_jump) unless the next scan continues its timeline (a source that restarted)",
-        "s",
-        min=0.001,
-        max=1e9,
-    )
-    gravity_max_angle_deg: float = param(
-        15.0,
-        "a scan's gravity (or IMU orientation) farther than this from the map's up is an "
-        "outlier: counted, not used",
-        "deg",
-        min=0.1,
-        max=90.0,
-    )
-    gravity_min_agreeing: int = param(
-        3,
-        "scans whose gravity agree (within gravity_max_angle_deg) before it replaces an "
-        "assumed or estimated up",
-        min=2,
-        max=100,
-    )
-    map: MapParams = field(default_factory=MapParams)
-    frame_id: str = param(
-        "map",
-        "frame of published results for scans with a pose: the map frame, rotated to gravity "
-        "when a correction applies (scans without a pose: their own frame_id)",
-    )
-    curve_enabled: bool = param(
-        False,
-        "encrypt and authenticate the node's sockets with ZeroMQ CURVE (keys in curve_keys_dir)",
-    )
-    curve_keys_dir: str = param(
-        "",
-        "CURVE key folder: this node's server.key_secret, the scan driver's public key "
-        "scan_server.key (the node connects for scans), subscribers/*.key (clients allowed "
-        "to subscribe to results), drivers/*.key (drivers allowed to publish scans when "
-        "scan_bind)",
     )
