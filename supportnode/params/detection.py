@@ -148,14 +148,6 @@ class SurfaceParams:
         min=0.0,
     )
 
-    @property
-    def voxel_size(self) -> tuple[float, float, float]:
-        """`plane_voxel` under its name before 0.2 (the key ``surfaces.voxel_size`` is an error).
-
-        Read only by code being rewritten elsewhere (geometry/surfaces/planar.py, clutter.py);
-        goes once they read ``plane_voxel``.
-        """
-        return self.plane_voxel
 
 
 @dataclass(frozen=True)
@@ -246,14 +238,6 @@ class ObjectParams:
         max=2.0,
     )
 
-    @property
-    def voxel_size(self) -> float:
-        """`cluster_cell` under its name before 0.2 (the key ``objects.voxel_size`` is an error).
-
-        Read only by code being rewritten elsewhere (geometry/objects/); goes once it reads
-        ``cluster_cell``.
-        """
-        return self.cluster_cell
 
 
 @dataclass(frozen=True)

@@ -53,13 +53,13 @@ def convex_segments(
     smooth_deg: float = 25.0,
     min_points: int = 30,
     sigma: float = 0.0015,
+    grow: bool = True,
 ) -> np.ndarray:
     """(M,) int64 segment of each point of ``points`` (M, 3) float, metres; -1 for none.
 
     origin: (3,) sensor position (normals turn toward it), None: each group of touching
-    cells turns its normals away from its centroid. cell: edge of the fine cells (grown
-    x1.5 until a typical occupied cell holds a few points, so sparse clouds and maps work
-    too), metres; normal_cells: a cell's normal comes from the cells within this many cells
+    cells turns its normals away from its centroid. cell: edge of the fine cells (with
+    ``grow``, grown x1.5 until a typical occupied cell holds a few points), metres; normal_cells: a cell's normal comes from the cells within this many cells
     of it. smooth_deg: faces whose normals differ by less than this stay joined where they
     meet concavely. min_points: smaller segments join the neighbour they share most links
     with. sigma: the depth noise, metres (faces do not grow across steps above it)."""
@@ -68,7 +68,7 @@ def convex_segments(
         return np.zeros(0, np.int64)
     pad = max(_PAD, normal_cells + 1)
     cells = make_cells(pts, cell, pad)
-    while np.median(cells.moments[:, 0]) < _MIN_PER_CELL and cell < _MAX_CELL:
+    while grow and np.median(cells.moments[:, 0]) < _MIN_PER_CELL and cell < _MAX_CELL:
         cell *= 1.5
         cells = make_cells(pts, cell, pad)
     src, dst = cells.grid.adjacent_pairs()
@@ -168,60 +168,81 @@ def cluster_convex(
     """(M,) int64 segment of each candidate point cp (M, 3), metres, z up; -1 for none.
 
     The candidates' connected voxels (:func:`clusters._cluster_voxel`, as the voxel method)
-    that are sampled densely enough to show faces (a typical cell of
-    ``_DENSE_CELLS x convex_cell`` holds a few points: a depth camera's view) are segmented
-    by local convexity; sparser ones (a lidar's far returns, a thinly sampled map) stay
-    whole, to be split by their footprints. In the dense ones the points in the noise band of
-    the surface under them (support: (M,) its id, -1 for none) are the table's and never
-    link two objects: the surface's own band (:meth:`Surface.band_width` at the point's
-    range; 1 m when the sensor is unknown)."""
-    comp = _cluster_voxel(cp, params.voxel_size, stats, support)
-    dense = _dense(cp, comp, params.convex_cell * _DENSE_CELLS)
+    that are sampled densely enough to show faces (a typical cell of ``convex_cell``, or
+    1.5 or 2.25 times it, holds a few points: a depth camera's view) are segmented by
+    local convexity on cells of that size; sparser ones (a lidar's far returns, a thinly
+    sampled map) stay whole, to be split by their footprints. In the dense ones the points
+    in the noise band of the surface under them (support: (M,) its id, -1 for none) are the
+    table's and never link two objects: the surface's own band (:meth:`Surface.band_width`
+    at the point's range; 1 m when the sensor is unknown)."""
+    comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
+    level = _cell_level(cp, comp, params.convex_cell)
+    dense = level < len(_CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
-    if not dense.any():
-        return comp
-    rows = np.flatnonzero(dense[comp])
-    pts, sup = cp[rows], support[rows]
-    above, band, sigma = _band(pts, sup, surfaces, origin)
-    free = rows[above > band]
-    stats["band_points"] = int(len(rows) - len(free))
-    seg = convex_segments(
-        cp[free],
-        origin,
-        cell=params.convex_cell,
-        normal_cells=params.convex_normal_cells,
-        smooth_deg=params.convex_smooth_deg,
-        min_points=params.min_points,
-        sigma=float(np.median(sigma[above > band])) if len(free) else 0.0,
-    )
-    # Sparse components keep their ids; dense ones are replaced by their segments.
     out = np.where(dense[comp], -1, comp)
     _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
+    if not dense.any():
+        return out
+    rows = np.flatnonzero(dense[comp])
+    above, band, sigma = _band(cp[rows], support[rows], surfaces, origin)
+    free = above > band
+    stats["band_points"] = int(len(rows) - free.sum())
+    noise = float(np.median(sigma[free])) if free.any() else 0.0
     base = int(out.max()) + 1 if (out >= 0).any() else 0
-    out[free] = np.where(seg >= 0, seg + base, -1)
-    stats["convex_segments"] = int(seg.max()) + 1 if len(seg) else 0
+    for k, step in enumerate(_CELL_STEPS):
+        at = rows[free & (level[comp[rows]] == k)]
+        if len(at) == 0:
+            continue
+        seg = convex_segments(
+            cp[at],
+            origin,
+            cell=params.convex_cell * step,
+            normal_cells=params.convex_normal_cells,
+            smooth_deg=params.convex_smooth_deg,
+            min_points=params.min_points,
+            sigma=noise,
+            grow=False,
+        )
+        out[at] = np.where(seg >= 0, seg + base, -1)
+        base += int(seg.max()) + 1 if len(seg) else 0
     return out
 
 
-# A voxel component is dense enough for faces when a typical cell of this many convex
-# cells holds _MIN_PER_CELL points (the convex cell would grow at most twice).
-_DENSE_CELLS = 2.25
+# The convex cell sizes a component may take (times objects.convex_cell): the first whose
+# typical cell holds _MIN_PER_CELL of its points; sparser components are not segmented.
+_CELL_STEPS = (1.0, 1.5, 2.25)
 
 
-def _dense(cp: np.ndarray, comp: np.ndarray, cell: float) -> np.ndarray:
-    """(C,) bool per component: its median ``cell`` cell holds at least _MIN_PER_CELL."""
+def _cell_level(cp: np.ndarray, comp: np.ndarray, cell: float) -> np.ndarray:
+    """(C,) int per component: the index in _CELL_STEPS of its cell size, len(_CELL_STEPS)
+    when even the largest holds too few points."""
     n = int(comp.max()) + 1 if len(comp) else 0
+    level = np.full(n, len(_CELL_STEPS), np.int64)
+    for k in reversed(range(len(_CELL_STEPS))):
+        ok = _median_per_cell(cp, comp, n, cell * _CELL_STEPS[k]) >= _MIN_PER_CELL
+        level[ok] = k
+    return level
+
+
+def _median_per_cell(cp: np.ndarray, comp: np.ndarray, n: int, cell: float) -> np.ndarray:
+    """(n,) the median number of a component's points per occupied ``cell`` cell."""
     if n == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros(0)
     ijk = np.floor((cp - cp.min(axis=0)) / cell).astype(np.int64)
     dims = ijk.max(axis=0) + 1
-    key = ((comp * dims[0] + ijk[:, 0]) * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    cells, count = np.unique(key, return_counts=True)
-    owner = cells // (dims[0] * dims[1] * dims[2])
+    if float(np.prod(dims.astype(np.float64))) < 2.0**62:
+        key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    else:  # a huge extent in small cells: number the occupied cells instead
+        key = np.unique(ijk, axis=0, return_inverse=True)[1].reshape(-1)
+    # Cells of different components apart: the pair (component, cell) in one sort.
+    order = np.lexsort((key, comp))
+    k, c = key[order], comp[order]
+    start = np.flatnonzero(np.r_[True, (k[1:] != k[:-1]) | (c[1:] != c[:-1])])
+    count = np.diff(np.r_[start, len(k)])
+    owner = c[start]
     order = np.lexsort((count, owner))
     bounds = np.searchsorted(owner[order], np.arange(n + 1))
-    med = count[order][(bounds[:-1] + bounds[1:]) // 2]
-    return med >= _MIN_PER_CELL
+    return count[order][(bounds[:-1] + bounds[1:]) // 2]
 
 
 def _band(

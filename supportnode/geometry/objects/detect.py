@@ -107,7 +107,7 @@ def cluster_objects(
         lab = _cluster_knn(cp, params, stats)
     elif params.method == "voxel":
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
-        lab = _cluster_voxel(cp, params.voxel_size, stats, support)
+        lab = _cluster_voxel(cp, params.cluster_cell, stats, support)
     elif params.method == "convex":
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         lab = cluster_convex(cp, surfaces.surfaces, support, params, sensor_origin, stats)

@@ -199,7 +199,7 @@ def _filter_components(
         return 0
     comp = surface_of_voxel[sv]
     keys = grid.keys[sv]
-    vx, vy = params.voxel_size[0], params.voxel_size[1]
+    vx, vy = params.plane_voxel[0], params.plane_voxel[1]
     # Footprint cells per component (a column holding two layers of one surface counts once).
     cell_lin, cell_comp = _unique_cells(keys[:, :2], comp)
     n_cells = np.bincount(cell_comp, minlength=int(comp.max()) + 1)
