@@ -24,6 +24,7 @@ from supportnode.geometry.objects.faces import (
     window_normals,
 )
 from supportnode.geometry.surfaces import Surface
+from supportnode.kernels.cellgraph import CellGrid
 from supportnode.kernels.components import label_edges
 from supportnode.params import ObjectParams
 
@@ -34,6 +35,7 @@ _PAD = 3  # cells of padding: windows reach this far
 # face have normals within this angle and lie on each other's plane within this many noise
 # sigmas (at least a third of a cell); a face holds at least this many points.
 _FLAT = 0.04
+_FLAT_NOISE = 2.0  # times a noisy plane's own surface variation
 _FACE_DEG = 15.0
 _FACE_SIGMAS = 3.0
 _FACE_MIN_POINTS = 20
@@ -75,8 +77,12 @@ def convex_segments(
     normal, variation = window_normals(cells, normal_cells)
     normal = orient(normal, cells.centroid, origin, _groups(cells, src, dst, origin))
     offset = max(_FACE_SIGMAS * sigma, cell / 3.0)
+    # A noisy plane's window is not flat to zero: its least eigenvalue is sigma^2 against
+    # (2w + 1)^2 cell^2 / 12 in each direction along it.
+    width = (2 * normal_cells + 1) * cell
+    flat = max(_FLAT, _FLAT_NOISE * sigma**2 / (width**2 / 6.0))
     face = grow_faces(
-        cells, normal, variation, src, dst, _FLAT, _FACE_DEG, offset, _FACE_MIN_POINTS
+        cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS
     )
     seg = np.full(len(face), -1, np.int64)
     if (face >= 0).any():
@@ -168,81 +174,98 @@ def cluster_convex(
     """(M,) int64 segment of each candidate point cp (M, 3), metres, z up; -1 for none.
 
     The candidates' connected voxels (:func:`clusters._cluster_voxel`, as the voxel method)
-    that are sampled densely enough to show faces (a typical cell of ``convex_cell``, or
-    1.5 or 2.25 times it, holds a few points: a depth camera's view) are segmented by
-    local convexity on cells of that size; sparser ones (a lidar's far returns, a thinly
-    sampled map) stay whole, to be split by their footprints. In the dense ones the points
-    in the noise band of the surface under them (support: (M,) its id, -1 for none) are the
-    table's and never link two objects: the surface's own band (:meth:`Surface.band_width`
-    at the point's range; 1 m when the sensor is unknown)."""
+    that are sampled densely enough to show faces (a depth camera's view: a cell of
+    ``convex_cell``, or 1.5 or 2.25 times it, wide against the points' spacing and noise)
+    are segmented by local convexity on cells of that size; sparser ones (a lidar's far
+    returns, a thinly sampled map) stay whole, to be split by their footprints. In the dense
+    ones the points in the noise band of the surface under them (support: (M,) its id, -1
+    for none) are the table's and never link two objects: the surface's own band
+    (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
     comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
-    level = _cell_level(cp, comp, params.convex_cell)
+    above, band, sigma = _band(cp, support, surfaces, origin)
+    level, window = _cell_level(cp, comp, sigma, params.convex_cell, params.convex_normal_cells)
     dense = level < len(_CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
     out = np.where(dense[comp], -1, comp)
     _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
     if not dense.any():
         return out
-    rows = np.flatnonzero(dense[comp])
-    above, band, sigma = _band(cp[rows], support[rows], surfaces, origin)
-    free = above > band
-    stats["band_points"] = int(len(rows) - free.sum())
-    noise = float(np.median(sigma[free])) if free.any() else 0.0
+    free = dense[comp] & (above > band)
+    stats["band_points"] = int((dense[comp] & ~free).sum())
     base = int(out.max()) + 1 if (out >= 0).any() else 0
-    for k, step in enumerate(_CELL_STEPS):
-        at = rows[free & (level[comp[rows]] == k)]
+    # One segmentation per cell size and normal window (a few: near and far objects).
+    for k, w in sorted({(int(a), int(b)) for a, b in zip(level[dense], window[dense], strict=True)}):
+        at = np.flatnonzero(free & (level[comp] == k) & (window[comp] == w))
         if len(at) == 0:
             continue
         seg = convex_segments(
             cp[at],
             origin,
-            cell=params.convex_cell * step,
-            normal_cells=params.convex_normal_cells,
+            cell=params.convex_cell * _CELL_STEPS[k],
+            normal_cells=w,
             smooth_deg=params.convex_smooth_deg,
             min_points=params.min_points,
-            sigma=noise,
+            sigma=float(np.median(sigma[at])),
             grow=False,
         )
         out[at] = np.where(seg >= 0, seg + base, -1)
         base += int(seg.max()) + 1 if len(seg) else 0
+    # A dense component that formed no face at all (too small or too curved for its cells)
+    # stays whole rather than vanish.
+    none = dense & (np.bincount(comp, weights=out >= 0, minlength=len(dense)) == 0)
+    if none.any():
+        lost = free & none[comp]
+        _, inv = np.unique(comp[lost], return_inverse=True)
+        out[lost] = base + inv.reshape(-1)
     return out
 
 
-# The convex cell sizes a component may take (times objects.convex_cell): the first whose
-# typical cell holds _MIN_PER_CELL of its points; sparser components are not segmented.
+# The convex cell sizes a component may take (times objects.convex_cell): the first at least
+# _CELL_PER_SPACING times its points' spacing (its surfaces stay connected cell to cell, and
+# a gap a few spacings wide still cuts); sparser components are not segmented. Its normals'
+# window spans at least _WINDOW_SIGMAS noise sigmas (at most _MAX_WINDOW cells each side).
+# Spacing and noise are measured on up to _SPACING_SAMPLES points of each component.
 _CELL_STEPS = (1.0, 1.5, 2.25)
+_CELL_PER_SPACING = 2.5
+_WINDOW_SIGMAS = 8.0
+_MAX_WINDOW = 5
+_SPACING_SAMPLES = 200
 
 
-def _cell_level(cp: np.ndarray, comp: np.ndarray, cell: float) -> np.ndarray:
-    """(C,) int per component: the index in _CELL_STEPS of its cell size, len(_CELL_STEPS)
-    when even the largest holds too few points."""
+def _cell_level(
+    cp: np.ndarray, comp: np.ndarray, sigma: np.ndarray, cell: float, min_window: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per component (C,): the index in _CELL_STEPS of its cell size (len(_CELL_STEPS) when
+    even the largest is finer than its points' spacing), and its normal window in cells
+    (at least ``min_window``). sigma: (M,) each point's noise (its surface's at its range; 0
+    when unknown), metres."""
+    from scipy.spatial import cKDTree
+
     n = int(comp.max()) + 1 if len(comp) else 0
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # A few evenly spread points of each component: their nearest other point's distance.
+    order = np.argsort(comp, kind="stable")
+    bounds = np.searchsorted(comp[order], np.arange(n + 1))
+    size = np.diff(bounds)
+    take = np.minimum(size, _SPACING_SAMPLES)
+    rank = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
+    pick = order[np.repeat(bounds[:-1], take) + rank * np.repeat(size // np.maximum(take, 1), take)]
+    dist, _ = cKDTree(cp).query(cp[pick], k=2)
+    owner = comp[pick]
+    spacing = np.zeros(n)
+    noise = np.zeros(n)
+    for values, out in ((dist[:, 1], spacing), (sigma[pick], noise)):
+        srt = np.lexsort((values, owner))
+        mid = np.searchsorted(owner[srt], np.arange(n)) + take // 2
+        out[:] = values[srt][np.minimum(mid, len(srt) - 1)]
+    need = _CELL_PER_SPACING * spacing / cell  # in convex cells
     level = np.full(n, len(_CELL_STEPS), np.int64)
     for k in reversed(range(len(_CELL_STEPS))):
-        ok = _median_per_cell(cp, comp, n, cell * _CELL_STEPS[k]) >= _MIN_PER_CELL
-        level[ok] = k
-    return level
-
-
-def _median_per_cell(cp: np.ndarray, comp: np.ndarray, n: int, cell: float) -> np.ndarray:
-    """(n,) the median number of a component's points per occupied ``cell`` cell."""
-    if n == 0:
-        return np.zeros(0)
-    ijk = np.floor((cp - cp.min(axis=0)) / cell).astype(np.int64)
-    dims = ijk.max(axis=0) + 1
-    if float(np.prod(dims.astype(np.float64))) < 2.0**62:
-        key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    else:  # a huge extent in small cells: number the occupied cells instead
-        key = np.unique(ijk, axis=0, return_inverse=True)[1].reshape(-1)
-    # Cells of different components apart: the pair (component, cell) in one sort.
-    order = np.lexsort((key, comp))
-    k, c = key[order], comp[order]
-    start = np.flatnonzero(np.r_[True, (k[1:] != k[:-1]) | (c[1:] != c[:-1])])
-    count = np.diff(np.r_[start, len(k)])
-    owner = c[start]
-    order = np.lexsort((count, owner))
-    bounds = np.searchsorted(owner[order], np.arange(n + 1))
-    return count[order][(bounds[:-1] + bounds[1:]) // 2]
+        level[_CELL_STEPS[k] >= need] = k
+    step = np.asarray(_CELL_STEPS + (_CELL_STEPS[-1],))[level]
+    window = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * cell * step)).astype(np.int64)
+    return level, np.clip(window, min_window, max(min_window, _MAX_WINDOW))
 
 
 def _band(
