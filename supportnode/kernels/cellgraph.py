@@ -146,7 +146,15 @@ class CellGrid:
         if lab.shape != (len(self.ijk),):
             raise ValueError("labels must be (F,), one per cell")
         return _window_sums(
-            self.ijk, self.dims, self._tk, self._tv, self._shift, mom, int(w), lab, label is not None
+            self.ijk,
+            self.dims,
+            self._tk,
+            self._tv,
+            self._shift,
+            mom,
+            int(w),
+            lab,
+            label is not None,
         )
 
     def adjacent_pairs(self) -> tuple[np.ndarray, np.ndarray]:

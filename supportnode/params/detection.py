@@ -149,7 +149,6 @@ class SurfaceParams:
     )
 
 
-
 @dataclass(frozen=True)
 class ObjectParams:
     """Supported-object segmentation (Algorithm 2 of the report and the voxel default)."""
@@ -237,7 +236,6 @@ class ObjectParams:
         min=0.0,
         max=2.0,
     )
-
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,6 @@ from supportnode.geometry.objects.faces import (
     window_normals,
 )
 from supportnode.geometry.surfaces import Surface
-from supportnode.kernels.cellgraph import CellGrid
 from supportnode.kernels.components import label_edges
 from supportnode.params import ObjectParams
 
@@ -81,9 +80,7 @@ def convex_segments(
     # (2w + 1)^2 cell^2 / 12 in each direction along it.
     width = (2 * normal_cells + 1) * cell
     flat = max(_FLAT, _FLAT_NOISE * sigma**2 / (width**2 / 6.0))
-    face = grow_faces(
-        cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS
-    )
+    face = grow_faces(cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS)
     seg = np.full(len(face), -1, np.int64)
     if (face >= 0).any():
         seg = _join_faces(cells, face, src, dst, normal_cells, origin, smooth_deg)
@@ -194,7 +191,9 @@ def cluster_convex(
     stats["band_points"] = int((dense[comp] & ~free).sum())
     base = int(out.max()) + 1 if (out >= 0).any() else 0
     # One segmentation per cell size and normal window (a few: near and far objects).
-    for k, w in sorted({(int(a), int(b)) for a, b in zip(level[dense], window[dense], strict=True)}):
+    for k, w in sorted(
+        {(int(a), int(b)) for a, b in zip(level[dense], window[dense], strict=True)}
+    ):
         at = np.flatnonzero(free & (level[comp] == k) & (window[comp] == w))
         if len(at) == 0:
             continue

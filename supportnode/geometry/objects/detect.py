@@ -27,8 +27,8 @@ from supportnode.geometry.objects.clusters import (
     _order,
 )
 from supportnode.geometry.objects.convexity import cluster_convex
-from supportnode.geometry.objects.feet import claim_enclosed, claim_feet
 from supportnode.geometry.objects.describe import _describe, _stack
+from supportnode.geometry.objects.feet import claim_enclosed, claim_feet
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -171,7 +171,9 @@ def _claim_feet(
     band_xyz = np.concatenate([pts[on], cp[loose]])
     band_surf = np.concatenate([surfaces.labels[on].astype(np.int64), support[loose]])
     cell = params.convex_cell
-    owner = claim_feet(band_xyz, band_surf, height, cp, lab, support, height, cell, params.foot_reach)
+    owner = claim_feet(
+        band_xyz, band_surf, height, cp, lab, support, height, cell, params.foot_reach
+    )
     owner = claim_enclosed(
         band_xyz, band_surf, height, owner, cp, lab, cell, _MAX_INSIDE, _MIN_RAISE
     )

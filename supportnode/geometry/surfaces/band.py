@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
-from supportnode.kernels.components import label_edges
 from supportnode.geometry.surfaces.planar import _label_by_plane_of, _label_points_planar, _Planes
 from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
+from supportnode.kernels.components import label_edges
 from supportnode.params import SurfaceParams
 
 # Range bins for the fit, metres wide; a bin needs this many points to count.
@@ -109,7 +109,9 @@ class Band:
     def width(self, surface: np.ndarray, voxel: np.ndarray) -> np.ndarray:
         r = 0.0 if self.r_voxel is None else self.r_voxel[voxel]
         w = np.maximum(self.sigmas * self.model.sigma(surface, r), self.floor)
-        return np.where(self.by_band[surface], np.minimum(w, self.tolerance[surface]), self.tolerance[surface])
+        return np.where(
+            self.by_band[surface], np.minimum(w, self.tolerance[surface]), self.tolerance[surface]
+        )
 
 
 def label_in_band(
@@ -192,7 +194,9 @@ def label_ring(
         vsel, t = hit[on], sv[on]
         if len(vsel):
             surf = surface_of_voxel[t]
-            _label_by_plane_of(grid, planes, t, vsel, surf, band.width(surf, vsel), labels, best, True)
+            _label_by_plane_of(
+                grid, planes, t, vsel, surf, band.width(surf, vsel), labels, best, True
+            )
     new = labels[(labels >= 0) & (before < 0)]
     return np.bincount(new, minlength=len(kept))
 
@@ -274,7 +278,10 @@ def drop_raised(
     inv = inv.reshape(-1)
     n = np.bincount(inv)
     mean = np.bincount(inv, best[at]) / n
-    sigma = np.bincount(inv, band.model.sigma(sid, 0.0 if band.r_voxel is None else band.r_voxel[vox])) / n
+    sigma = (
+        np.bincount(inv, band.model.sigma(sid, 0.0 if band.r_voxel is None else band.r_voxel[vox]))
+        / n
+    )
     raised = (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
     raised &= band.by_band[keys // ((int(ij[:, 0].max()) + 2) * span)]
     if not raised.any():
@@ -318,7 +325,9 @@ def band_decides(
     comp = labels[at].astype(np.int64)
     count = np.bincount(comp, minlength=n_comp).astype(np.float64)
     sv = np.flatnonzero(surface_of_voxel >= 0)
-    cols = np.unique(np.stack([surface_of_voxel[sv], grid.keys[sv, 0], grid.keys[sv, 1]], 1), axis=0)
+    cols = np.unique(
+        np.stack([surface_of_voxel[sv], grid.keys[sv, 0], grid.keys[sv, 1]], 1), axis=0
+    )
     area = np.bincount(cols[:, 0], minlength=n_comp) * grid.size[0] * grid.size[1]
     spacing = np.sqrt(area / np.maximum(count, 1.0))
     r = np.zeros(len(at)) if band.r_voxel is None else band.r_voxel[vox]
