@@ -80,10 +80,12 @@ def _window_sums(
     w: int,
     label: np.ndarray,
     same: bool,
+    at: np.ndarray,
 ) -> np.ndarray:
-    n, m = mom.shape
-    out = np.zeros((n, m))
-    for c in range(n):
+    m = mom.shape[1]
+    out = np.zeros((at.size, m))
+    for r in range(at.size):
+        c = at[r]
         for dx in range(-w, w + 1):
             for dy in range(-w, w + 1):
                 base = ((ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy) * dims[2] + ijk[c, 2]
@@ -91,7 +93,7 @@ def _window_sums(
                     j = _find(tk, tv, shift, base + dz)
                     if j >= 0 and (not same or label[j] == label[c]):
                         for q in range(m):
-                            out[c, q] += mom[j, q]
+                            out[r, q] += mom[j, q]
     return out
 
 
@@ -116,6 +118,73 @@ def _pairs(
     return src[:e], dst[:e]
 
 
+@njit(cache=True)
+def _nearest(
+    pts: np.ndarray,
+    first: np.ndarray,
+    ijk: np.ndarray,
+    dims: np.ndarray,
+    tk: np.ndarray,
+    tv: np.ndarray,
+    shift: int,
+    cell_of: np.ndarray,
+    query: np.ndarray,
+) -> np.ndarray:
+    out = np.full(query.size, np.inf)
+    for r in range(query.size):
+        p = query[r]
+        c = cell_of[p]
+        best = np.inf
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                base = ((ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy) * dims[2] + ijk[c, 2]
+                for dz in range(-1, 2):
+                    j = _find(tk, tv, shift, base + dz)
+                    if j < 0:
+                        continue
+                    for q in range(first[j], first[j + 1]):
+                        if q != p:
+                            d = (
+                                (pts[q, 0] - pts[p, 0]) ** 2
+                                + (pts[q, 1] - pts[p, 1]) ** 2
+                                + (pts[q, 2] - pts[p, 2]) ** 2
+                            )
+                            if d < best:
+                                best = d
+        out[r] = np.sqrt(best)
+    return out
+
+
+def nearest_distances(points: np.ndarray, query: np.ndarray, cell: float) -> np.ndarray:
+    """(Q,) distance from each of the points ``query`` (Q,) int to its nearest other point of
+    ``points`` (N, 3) float64, metres, looked for within one ``cell`` cell around it (inf
+    when there is none that near): a point spacing without a k-d tree."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    q = np.ascontiguousarray(query, dtype=np.int64).ravel()
+    if not np.isfinite(pts).all():
+        raise ValueError("points must be finite")
+    if not cell > 0:
+        raise ValueError(f"cell must be > 0, got {cell}")
+    if len(q) and (q.min() < 0 or q.max() >= len(pts)):
+        raise ValueError("query points lie outside the points")
+    if len(q) == 0:
+        return np.zeros(0)
+    ijk = np.floor((pts - pts.min(axis=0)) / cell).astype(np.int64) + 1
+    dims = ijk.max(axis=0) + 2
+    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    order = np.argsort(key, kind="stable")
+    keys, start = np.unique(key[order], return_index=True)
+    cells = np.stack([keys // (dims[1] * dims[2]), (keys // dims[2]) % dims[1], keys % dims[2]], 1)
+    grid = CellGrid(cells, dims, 1)
+    cell_of = np.empty(len(pts), np.int64)
+    cell_of[order] = np.repeat(np.arange(len(keys)), np.diff(np.r_[start, len(pts)]))
+    rank = np.empty(len(pts), np.int64)
+    rank[order] = np.arange(len(pts))
+    first = np.r_[start, len(pts)].astype(np.int64)
+    grid_args = (grid.ijk, grid.dims, grid._tk, grid._tv, grid._shift)
+    return _nearest(pts[order], first, *grid_args, cell_of[order], rank[q])
+
+
 class CellGrid:
     """The occupied cells (F, 3) int64 coordinates of a sparse grid with its lookup table.
 
@@ -134,9 +203,16 @@ class CellGrid:
         keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
         self._tk, self._tv, self._shift = _build(keys)
 
-    def window_sums(self, mom: np.ndarray, w: int, label: np.ndarray | None = None) -> np.ndarray:
+    def window_sums(
+        self,
+        mom: np.ndarray,
+        w: int,
+        label: np.ndarray | None = None,
+        at: np.ndarray | None = None,
+    ) -> np.ndarray:
         """(F, M) sums of ``mom`` (F, M) float64 over the cells within ``w`` cells of each
-        cell (Chebyshev), only those of the cell's own ``label`` (F,) when given."""
+        cell (Chebyshev), only those of the cell's own ``label`` (F,) when given; (K, M) for
+        the cells ``at`` (K,) only when given."""
         if not 0 <= w <= self.pad:
             raise ValueError(f"window {w} exceeds the grid's padding {self.pad}")
         mom = np.ascontiguousarray(mom, dtype=np.float64)
@@ -145,17 +221,12 @@ class CellGrid:
         lab = np.zeros(len(self.ijk), np.int64) if label is None else np.asarray(label, np.int64)
         if lab.shape != (len(self.ijk),):
             raise ValueError("labels must be (F,), one per cell")
-        return _window_sums(
-            self.ijk,
-            self.dims,
-            self._tk,
-            self._tv,
-            self._shift,
-            mom,
-            int(w),
-            lab,
-            label is not None,
-        )
+        rows = np.arange(len(self.ijk)) if at is None else np.asarray(at, np.int64).ravel()
+        if len(rows) and (rows.min() < 0 or rows.max() >= len(self.ijk)):
+            raise ValueError("cells asked for lie outside the grid")
+        same = label is not None
+        grid = (self.ijk, self.dims, self._tk, self._tv, self._shift)
+        return _window_sums(*grid, mom, int(w), lab, same, rows)
 
     def adjacent_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Pairs (src, dst) of 26-adjacent cells, each pair once: two (E,) int64."""
@@ -168,5 +239,6 @@ class CellGrid:
 def _warm() -> None:
     g = CellGrid(np.array([[2, 2, 2], [2, 3, 2]]), np.array([5, 6, 5]), 2)
     g.window_sums(np.ones((2, MOMENTS)), 1)
-    g.window_sums(np.ones((2, MOMENTS)), 1, np.array([0, 1]))
+    g.window_sums(np.ones((2, MOMENTS)), 1, np.array([0, 1]), np.array([1]))
     g.adjacent_pairs()
+    nearest_distances(np.array([[0.0, 0, 0], [0.001, 0, 0]]), np.array([0]), 0.01)

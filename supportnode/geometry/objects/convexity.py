@@ -24,6 +24,7 @@ from supportnode.geometry.objects.faces import (
     window_normals,
 )
 from supportnode.geometry.surfaces import Surface
+from supportnode.kernels.cellgraph import nearest_distances
 from supportnode.kernels.components import label_edges
 from supportnode.params import ObjectParams
 
@@ -95,6 +96,15 @@ def _groups(
     return None if origin is not None else label_edges(len(cells.centroid), src, dst)
 
 
+def _group_of(
+    cells: Cells, src: np.ndarray, dst: np.ndarray, origin: np.ndarray | None, at: np.ndarray
+) -> np.ndarray | None:
+    """:func:`_groups` of the cells ``at`` (their centroids' groups' centroids stay those of
+    all the group's cells)."""
+    g = _groups(cells, src, dst, origin)
+    return None if g is None else g[at]
+
+
 def _join_faces(
     cells: Cells,
     face: np.ndarray,
@@ -107,12 +117,17 @@ def _join_faces(
     """(F,) segment of each cell (-1: none): faces joined across their convex boundaries,
     judged with each cell's normal taken from its own face's cells (both sides of a crease
     keep their face's normal, not the blend of the two)."""
-    label = np.where(face >= 0, face, -2 - np.arange(len(face)))
-    normal, _ = window_normals(cells, normal_cells, label)
-    normal = orient(normal, cells.centroid, origin, _groups(cells, src, dst, origin))
     fa, fb = face[src], face[dst]
     on = (fa >= 0) & (fb >= 0) & (fa != fb)
     s, t = src[on], dst[on]
+    # Normals are needed only on the boundaries: their cells' windows, over their own face.
+    label = np.where(face >= 0, face, -2 - np.arange(len(face)))
+    normal = np.zeros((len(face), 3))
+    ends = np.unique(np.concatenate([s, t]))
+    part, _ = window_normals(cells, normal_cells, label, ends)
+    normal[ends] = orient(
+        part, cells.centroid[ends], origin, _group_of(cells, src, dst, origin, ends)
+    )
     d = cells.centroid[s] - cells.centroid[t]
     dist = np.linalg.norm(d, axis=1)
     d /= np.where(dist > 0, dist, 1.0)[:, None]
@@ -180,7 +195,9 @@ def cluster_convex(
     (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
     comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
     above, band, sigma = _band(cp, support, surfaces, origin)
-    level, window = _cell_level(cp, comp, sigma, params.convex_cell, params.convex_normal_cells)
+    level, window = _cell_level(
+        cp, comp, sigma, params.convex_cell, params.convex_normal_cells, params.min_points
+    )
     dense = level < len(_CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
     out = np.where(dense[comp], -1, comp)
@@ -232,36 +249,44 @@ _SPACING_SAMPLES = 200
 
 
 def _cell_level(
-    cp: np.ndarray, comp: np.ndarray, sigma: np.ndarray, cell: float, min_window: int
+    cp: np.ndarray,
+    comp: np.ndarray,
+    sigma: np.ndarray,
+    cell: float,
+    min_window: int,
+    min_points: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per component (C,): the index in _CELL_STEPS of its cell size (len(_CELL_STEPS) when
     even the largest is finer than its points' spacing), and its normal window in cells
     (at least ``min_window``). sigma: (M,) each point's noise (its surface's at its range; 0
     when unknown), metres."""
-    from scipy.spatial import cKDTree
-
     n = int(comp.max()) + 1 if len(comp) else 0
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     # A few evenly spread points of each component: their nearest other point's distance.
+    # Components too small to keep are left sparse (no samples, no tree for them).
     order = np.argsort(comp, kind="stable")
     bounds = np.searchsorted(comp[order], np.arange(n + 1))
     size = np.diff(bounds)
-    take = np.minimum(size, _SPACING_SAMPLES)
+    big = size >= min_points
+    if not big.any():
+        return np.full(n, len(_CELL_STEPS), np.int64), np.full(n, min_window, np.int64)
+    take = np.where(big, np.minimum(size, _SPACING_SAMPLES), 0)
     rank = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
     pick = order[np.repeat(bounds[:-1], take) + rank * np.repeat(size // np.maximum(take, 1), take)]
-    dist, _ = cKDTree(cp).query(cp[pick], k=2)
+    # Nearest neighbours looked for within a cell of the largest size: farther is sparse.
+    dist = nearest_distances(cp, pick, cell * _CELL_STEPS[-1])
     owner = comp[pick]
     spacing = np.zeros(n)
     noise = np.zeros(n)
-    for values, out in ((dist[:, 1], spacing), (sigma[pick], noise)):
+    for values, out in ((dist, spacing), (sigma[pick], noise)):
         srt = np.lexsort((values, owner))
         mid = np.searchsorted(owner[srt], np.arange(n)) + take // 2
         out[:] = values[srt][np.minimum(mid, len(srt) - 1)]
     need = _CELL_PER_SPACING * spacing / cell  # in convex cells
     level = np.full(n, len(_CELL_STEPS), np.int64)
     for k in reversed(range(len(_CELL_STEPS))):
-        level[_CELL_STEPS[k] >= need] = k
+        level[big & (_CELL_STEPS[k] >= need)] = k
     step = np.asarray(_CELL_STEPS + (_CELL_STEPS[-1],))[level]
     window = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * cell * step)).astype(np.int64)
     return level, np.clip(window, min_window, max(min_window, _MAX_WINDOW))

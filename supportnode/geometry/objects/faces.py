@@ -64,12 +64,13 @@ def make_cells(pts: np.ndarray, size: float, pad: int) -> Cells:
 
 
 def window_normals(
-    cells: Cells, w: int, label: np.ndarray | None = None
+    cells: Cells, w: int, label: np.ndarray | None = None, at: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (F, 3) (sign arbitrary) and surface variation (F,) (least eigenvalue over
     their sum: 0 on a plane, ~1/3 for isotropic scatter) of the points within ``w`` cells of
-    each cell, only those of cells with the same ``label`` when given."""
-    s = cells.grid.window_sums(cells.moments, w, label)
+    each cell, only those of cells with the same ``label`` when given; of the cells ``at``
+    only (K,) when given."""
+    s = cells.grid.window_sums(cells.moments, w, label, at)
     count = np.maximum(s[:, 0], 1.0)
     mean = [s[:, 1 + a] / count for a in range(3)]
     entries = [s[:, 4 + q] / count - mean[a] * mean[b] for q, (a, b) in enumerate(_OUTER)]

@@ -12,6 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
+# The largest raster (cells) of an object's feet or of the objects' joint footprint.
+_MAX_RASTER = 4_000_000
+# The joint footprint is closed by this many cells before its holes are filled.
+_CLOSE_CELLS = 4
+
 
 def claim_feet(
     xyz: np.ndarray,
@@ -36,32 +41,29 @@ def claim_feet(
     if not low.any() or len(xyz) == 0:
         return out
     idx = np.flatnonzero(low)
-    above = obj_xyz[idx, 2] - obj_height[obj_surface[idx]]
-    idx = idx[above <= reach]
-    if len(idx) == 0:
-        return out
-    base = np.minimum(obj_xyz[idx, :2].min(axis=0), xyz[:, :2].min(axis=0))
-    span = int(np.ceil((max(obj_xyz[idx, 1].max(), xyz[:, 1].max()) - base[1]) / cell)) + 2
-
-    n_surf = int(max(obj_surface[idx].max(), surface.max())) + 1
-    ij = np.floor((obj_xyz[idx, :2] - base) / cell).astype(np.int64)
-    key = (ij[:, 0] * span + ij[:, 1]) * n_surf + obj_surface[idx]
-    # The lowest object point of each (column, surface) decides the column's owner.
-    order = np.lexsort((obj_xyz[idx, 2], key))
-    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
-    col_key, col_obj = key[first], obj_label[idx[first]]
-    ij = np.floor((xyz[:, :2] - base) / cell).astype(np.int64)
-    q = (ij[:, 0] * span + ij[:, 1]) * n_surf + surface
-    at = np.minimum(np.searchsorted(col_key, q), len(col_key) - 1)
-    hit = col_key[at] == q
-    out[hit] = col_obj[at[hit]]
+    idx = idx[obj_xyz[idx, 2] - obj_height[obj_surface[idx]] <= reach]
+    for sid in np.unique(obj_surface[idx]):
+        mine = idx[obj_surface[idx] == sid]
+        lo = obj_xyz[mine, :2].min(axis=0)
+        ij = np.floor((obj_xyz[mine, :2] - lo) / cell).astype(np.int64)
+        shape = ij.max(axis=0) + 1
+        if shape[0] * shape[1] > _MAX_RASTER:
+            continue  # room structure's feet: left to the surface
+        # The lowest object point of each column decides its owner: written last.
+        order = np.argsort(-obj_xyz[mine, 2], kind="stable")
+        owner = np.full(shape, -1, np.int64)
+        owner[ij[order, 0], ij[order, 1]] = obj_label[mine[order]]
+        hi = lo + shape * cell
+        q = np.flatnonzero(
+            (surface == sid)
+            & (xyz[:, 0] >= lo[0])
+            & (xyz[:, 1] >= lo[1])
+            & (xyz[:, 0] < hi[0])
+            & (xyz[:, 1] < hi[1])
+        )
+        qij = np.minimum(np.floor((xyz[q, :2] - lo) / cell).astype(np.int64), shape - 1)
+        out[q] = owner[qij[:, 0], qij[:, 1]]
     return out
-
-
-# The largest raster of the objects' joint footprint searched for enclosed table (cells).
-_MAX_RASTER = 4_000_000
-# The footprint is closed by this many cells before its holes are filled.
-_CLOSE_CELLS = 4
 
 
 def claim_enclosed(

@@ -28,6 +28,8 @@ _BIN_MIN_POINTS = 50
 # at least this area (m^2), is no part of it (see drop_raised).
 _RAISED_SIGMAS = 1.5
 _RAISED_MIN_AREA = 0.004
+# The noise is fitted to an even sample of at most this many of the labelled points.
+_FIT_SAMPLES = 10_000
 # Robust sigma from the median absolute residual of a normal distribution.
 _MAD_TO_SIGMA = 1.4826
 
@@ -160,7 +162,9 @@ def _fit(
 ) -> NoiseModel:
     """:func:`fit_noise` of the labelled points (``best``: their heights above the planes)."""
     on = np.flatnonzero(labels >= 0)
-    voxel = np.repeat(np.arange(len(grid.counts)), grid.counts)[on]
+    # Medians need no more than an even sample (a scan's table holds ~10^5 points).
+    on = on[:: max(1, len(on) // _FIT_SAMPLES)]
+    voxel = np.searchsorted(grid.starts, on, side="right") - 1
     r = None if r_voxel is None else r_voxel[voxel]
     return fit_noise(labels[on].astype(np.int64), np.abs(best[on]), r, n)
 
@@ -223,13 +227,30 @@ def refit_planes(
     at = np.flatnonzero(labels >= 0)
     if len(sv) == 0 or len(at) == 0:
         return
-    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[at]
+    from supportnode.kernels.runs import run_moments
+
     n_vox = len(grid.counts)
-    # Moments per voxel of its labelled points, about the grid's origin (metres).
-    xyz = [grid.local[a][at] + grid.keys[vox, a] * grid.size[a] for a in range(3)]
-    count = np.bincount(vox, minlength=n_vox).astype(np.float64)
-    s1 = [np.bincount(vox, xyz[a], n_vox) for a in range(3)]
-    s2 = [np.bincount(vox, xyz[a] * xyz[b], n_vox) for a, b in OUTER_INDEX]
+    # Moments per voxel of its labelled points (one compiled pass over runs of the grid's
+    # columns, about each voxel's corner), then about the grid's origin (metres).
+    vox = np.searchsorted(grid.starts, at, side="right") - 1
+    run = np.flatnonzero(np.r_[True, vox[1:] != vox[:-1]])
+    v = vox[run]
+    loc1, loc2, _, _ = run_moments(grid.local, at, run)
+    n = np.diff(np.r_[run, len(at)]).astype(np.float64)
+    corner = grid.keys[v] * grid.size
+    count = np.zeros(n_vox)
+    count[v] = n
+    s1 = [np.zeros(n_vox) for _ in range(3)]
+    for a in range(3):
+        s1[a][v] = loc1[:, a] + n * corner[:, a]
+    s2 = [np.zeros(n_vox) for _ in range(6)]
+    for q, (a, b) in enumerate(OUTER_INDEX):
+        s2[q][v] = (
+            loc2[:, q]
+            + corner[:, a] * loc1[:, b]
+            + corner[:, b] * loc1[:, a]
+            + n * corner[:, a] * corner[:, b]
+        )
     lab_of_voxel = np.full(n_vox, -1, np.int64)
     lab_of_voxel[vox] = labels[at]
     own = surface_of_voxel[sv]
@@ -260,46 +281,55 @@ def refit_planes(
 def drop_raised(
     grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, band: Band, cell: float
 ) -> int:
-    """Unlabel, in place, the points of raised patches of a surface's band: ``cell`` columns
-    whose points lie on average more than ``_RAISED_SIGMAS`` sigma above their plane,
-    joined into patches of at least ``_RAISED_MIN_AREA`` m^2. The table's own points average
-    zero; a pot's inner bottom a few millimetres above it (or a sheet lying on it) does not,
-    though each of its points is within the band. Returns the points unlabelled."""
+    """Unlabel, in place, the points of raised patches of a surface's band: columns about
+    ``cell`` wide whose points lie on average more than ``_RAISED_SIGMAS`` sigma above their
+    plane, joined into patches of at least ``_RAISED_MIN_AREA`` m^2. The table's own points
+    average zero; a pot's inner bottom a few millimetres above it (or a sheet lying on it)
+    does not, though each of its points is within the band. Only surfaces the band decides.
+    Returns the points unlabelled."""
     at = np.flatnonzero(labels >= 0)
+    at = at[band.by_band[labels[at]]]
     if len(at) == 0:
         return 0
-    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[at]
-    xy = np.stack([grid.local[a][at] + grid.keys[vox, a] * grid.size[a] for a in range(2)], 1)
-    sid = labels[at].astype(np.int64)
-    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64) + 1
-    span = int(ij[:, 1].max()) + 2
-    key = (sid * (int(ij[:, 0].max()) + 2) + ij[:, 0]) * span + ij[:, 1]
-    keys, inv = np.unique(key, return_inverse=True)
-    inv = inv.reshape(-1)
-    n = np.bincount(inv)
-    mean = np.bincount(inv, best[at]) / n
-    sigma = (
-        np.bincount(inv, band.model.sigma(sid, 0.0 if band.r_voxel is None else band.r_voxel[vox]))
-        / n
+    # Columns within each voxel (a whole number of them per voxel edge): grouped without a
+    # sort, by the voxel and the column's place in it.
+    per = np.maximum(np.round(grid.size[:2] / cell).astype(np.int64), 1)
+    vox = np.searchsorted(grid.starts, at, side="right") - 1
+    li = np.minimum((grid.local[0][at] / grid.size[0] * per[0]).astype(np.int64), per[0] - 1)
+    lj = np.minimum((grid.local[1][at] / grid.size[1] * per[1]).astype(np.int64), per[1] - 1)
+    key = (vox * per[0] + li) * per[1] + lj
+    n_keys = len(grid.counts) * per[0] * per[1]
+    n = np.bincount(key, minlength=n_keys)
+    mean = np.bincount(key, best[at], minlength=n_keys) / np.maximum(n, 1)
+    comp = np.full(len(grid.counts), -1, np.int64)
+    comp[vox] = labels[at]
+    r = np.zeros(len(comp)) if band.r_voxel is None else band.r_voxel
+    sigma = band.model.sigma(np.maximum(comp, 0), r)[np.arange(n_keys) // (per[0] * per[1])]
+    raised = np.flatnonzero(
+        (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
     )
-    raised = (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
-    raised &= band.by_band[keys // ((int(ij[:, 0].max()) + 2) * span)]
-    if not raised.any():
+    if len(raised) == 0:
         return 0
-    rk = keys[raised]
-    # 8-connected patches of raised columns (keys of one surface differ by span or 1).
-    steps = np.array([1, span - 1, span, span + 1])
+    # 8-connected patches of raised columns, by their global column and surface.
+    v = raised // (per[0] * per[1])
+    gi = grid.keys[v, 0] * per[0] + (raised // per[1]) % per[0]
+    gj = grid.keys[v, 1] * per[1] + raised % per[1]
+    gi, gj = gi - gi.min() + 1, gj - gj.min() + 1
+    span = int(gj.max()) + 2
+    rk = (comp[v] * (int(gi.max()) + 2) + gi) * span + gj
+    order = np.argsort(rk)
+    rk = rk[order]
     src, dst = [], []
-    for st in steps:
+    for st in (1, span - 1, span, span + 1):
         hit = np.searchsorted(rk, rk + st)
         ok = (hit < len(rk)) & (rk[np.minimum(hit, len(rk) - 1)] == rk + st)
         src.append(np.flatnonzero(ok))
         dst.append(hit[ok])
     patch = label_edges(len(rk), np.concatenate(src), np.concatenate(dst))
-    area = np.bincount(patch) * cell * cell
-    big = np.zeros(len(keys), bool)
-    big[np.flatnonzero(raised)[area[patch] >= _RAISED_MIN_AREA]] = True
-    gone = at[big[inv]]
+    area = np.bincount(patch) * float(np.prod(grid.size[:2] / per))
+    big = np.zeros(n_keys, bool)
+    big[raised[order][area[patch] >= _RAISED_MIN_AREA]] = True
+    gone = at[big[key]]
     labels[gone] = -1
     return len(gone)
 
@@ -321,7 +351,6 @@ def band_decides(
     cloud noisy beyond that (a slab as thick as the objects are tall), neither tells."""
     n_comp = len(band.model.a)
     at = np.flatnonzero(labels >= 0)
-    vox = np.repeat(np.arange(len(grid.counts)), grid.counts)[at]
     comp = labels[at].astype(np.int64)
     count = np.bincount(comp, minlength=n_comp).astype(np.float64)
     sv = np.flatnonzero(surface_of_voxel >= 0)
@@ -330,8 +359,17 @@ def band_decides(
     )
     area = np.bincount(cols[:, 0], minlength=n_comp) * grid.size[0] * grid.size[1]
     spacing = np.sqrt(area / np.maximum(count, 1.0))
-    r = np.zeros(len(at)) if band.r_voxel is None else band.r_voxel[vox]
-    r_med = np.array([np.median(r[comp == c]) if count[c] else 0.0 for c in range(n_comp)])
+    # Each component's median range, from its voxels weighted by their labelled points.
+    r_med = np.zeros(n_comp)
+    if band.r_voxel is not None:
+        vox = np.searchsorted(grid.starts, at, side="right") - 1
+        key, w = np.unique(comp * len(grid.counts) + vox, return_counts=True)
+        c, r = key // len(grid.counts), band.r_voxel[key % len(grid.counts)]
+        order = np.lexsort((r, c))
+        cw = np.cumsum(w[order])
+        first = np.searchsorted(c[order], np.arange(n_comp))
+        half = np.r_[0, cw][first] + count / 2.0
+        r_med = r[order][np.minimum(np.searchsorted(cw, half), len(order) - 1)]
     sigma = band.model.sigma(np.arange(n_comp), r_med)
     thin = band.sigmas * sigma <= 0.25 * grid.size[2]
     return (count > 0) & thin & (spacing * np.sqrt(k / np.pi) < _VET_MIN_SIGMAS * sigma)
