@@ -45,6 +45,10 @@ _CONVEX_TOL = 0.05
 # The band over a surface that measured no noise (the seed method), metres.
 _FALLBACK_BAND = 0.005
 _CONCAVE_SHARE = 0.3
+# Boundaries of at least this many links join faces first; then segments join across all
+# their boundaries pooled, for up to this many rounds (see _vote).
+_STRONG_LINKS = 20
+_VOTE_ROUNDS = 4
 
 
 def convex_segments(
@@ -139,9 +143,35 @@ def _join_faces(
     pair, inv = np.unique(lo * n_face + hi, return_inverse=True)
     links = np.bincount(inv.reshape(-1), minlength=len(pair))
     n_concave = np.bincount(inv.reshape(-1), weights=concave, minlength=len(pair))
-    keep = n_concave < _CONCAVE_SHARE * links
-    seg_of_face = label_edges(n_face, pair[keep] // n_face, pair[keep] % n_face)
+    seg_of_face = _vote(n_face, pair // n_face, pair % n_face, links, n_concave)
     return np.where(face >= 0, seg_of_face[np.maximum(face, 0)], -1)
+
+
+def _vote(
+    n: int, a: np.ndarray, b: np.ndarray, links: np.ndarray, concave: np.ndarray
+) -> np.ndarray:
+    """(n,) segment of each face from its boundaries (a, b, links, concave links; (B,)).
+
+    Long boundaries speak first: faces joined across those of at least _STRONG_LINKS links
+    that are mostly convex. The segments so made then join across all that lies between
+    them, their boundaries' links pooled: a crease of a few links (where a box's face meets
+    the corner of the box it stands on) cannot join what a long concave crease parts."""
+    convex = concave < _CONCAVE_SHARE * links
+    strong = links >= _STRONG_LINKS
+    seg = label_edges(n, a[strong & convex], b[strong & convex])
+    for _ in range(_VOTE_ROUNDS):
+        sa, sb = np.minimum(seg[a], seg[b]), np.maximum(seg[a], seg[b])
+        between = sa != sb
+        if not between.any():
+            break
+        key, inv = np.unique(sa[between] * n + sb[between], return_inverse=True)
+        pooled = np.bincount(inv.reshape(-1), weights=links[between])
+        pooled_concave = np.bincount(inv.reshape(-1), weights=concave[between])
+        join = pooled_concave < _CONCAVE_SHARE * pooled
+        if not join.any():
+            break
+        seg = label_edges(n, key[join] // n, key[join] % n)[seg]
+    return seg
 
 
 def _absorb_small(

@@ -28,7 +28,7 @@ from supportnode.geometry.objects.clusters import (
 )
 from supportnode.geometry.objects.convexity import cluster_convex
 from supportnode.geometry.objects.describe import _describe, _stack
-from supportnode.geometry.objects.feet import claim_enclosed, claim_feet
+from supportnode.geometry.objects.feet import claim_enclosed, claim_feet, claim_raised
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -176,6 +176,13 @@ def _claim_feet(
     )
     owner = claim_enclosed(
         band_xyz, band_surf, height, owner, cp, lab, cell, _MAX_INSIDE, _MIN_RAISE
+    )
+    raised = np.r_[
+        np.isin(on, surfaces.raised, assume_unique=True),
+        np.isin(cand[loose], surfaces.raised, assume_unique=True),
+    ]
+    owner = claim_raised(
+        band_xyz, owner, raised, cp, lab, 2 * cell, 3 * params.foot_reach, params.min_points
     )
     took = owner[: len(on)] >= 0
     lab = lab.copy()

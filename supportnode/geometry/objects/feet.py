@@ -117,3 +117,53 @@ def claim_enclosed(
         ring = ndimage.binary_dilation(holes == h) & (who >= 0)
         out[mine] = np.bincount(who[ring]).argmax()
     return out
+
+
+def claim_raised(
+    xyz: np.ndarray,
+    owner: np.ndarray,
+    raised: np.ndarray,
+    obj_xyz: np.ndarray,
+    obj_label: np.ndarray,
+    cell: float,
+    reach: float,
+    min_points: int,
+) -> np.ndarray:
+    """``owner`` (K,) with the raised patches of the band given out: a patch (``raised``:
+    (K,) bool, points a surface found raised above its band, joined by ``cell`` columns)
+    goes whole to the object coming down within ``reach`` above it over most of its rim (a
+    pot's inner bottom, to the pot); a patch touching no object is an object of its own (a
+    sheet, a coaster) when it has ``min_points``, else stays none. New objects take labels
+    above ``obj_label``'s."""
+    from scipy import ndimage
+
+    out = owner.copy()
+    q = np.flatnonzero(raised & (out < 0))
+    if len(q) == 0:
+        return out
+    lo = xyz[q, :2].min(axis=0) - 3 * cell
+    shape = np.floor((xyz[q, :2].max(axis=0) - lo) / cell).astype(np.int64) + 4
+    if shape[0] * shape[1] > _MAX_RASTER:
+        return out
+    qij = np.floor((xyz[q, :2] - lo) / cell).astype(np.int64)
+    patch_img = np.zeros(shape, dtype=bool)
+    patch_img[qij[:, 0], qij[:, 1]] = True
+    patches, n = ndimage.label(patch_img, structure=np.ones((3, 3)))
+    # The objects' columns near the patches, their points no higher than reach above them.
+    top = xyz[q, 2].max() + reach
+    near = np.flatnonzero(obj_label >= 0)
+    oij = np.floor((obj_xyz[near, :2] - lo) / cell).astype(np.int64)
+    ok = np.all((oij >= 0) & (oij < shape), axis=1) & (obj_xyz[near, 2] <= top)
+    who = np.full(shape, -1, np.int64)
+    who[oij[ok, 0], oij[ok, 1]] = obj_label[near[ok]]
+    next_label = int(obj_label.max()) + 1 if len(obj_label) else 0
+    of_point = patches[qij[:, 0], qij[:, 1]]
+    for p in range(1, n + 1):
+        mine = q[of_point == p]
+        rim = ndimage.binary_dilation(patches == p, iterations=2) & (who >= 0)
+        if rim.any():
+            out[mine] = np.bincount(who[rim]).argmax()
+        elif len(mine) >= min_points:
+            out[mine] = next_label
+            next_label += 1
+    return out

@@ -280,17 +280,18 @@ def refit_planes(
 
 def drop_raised(
     grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, band: Band, cell: float
-) -> int:
+) -> np.ndarray:
     """Unlabel, in place, the points of raised patches of a surface's band: columns about
     ``cell`` wide whose points lie on average more than ``_RAISED_SIGMAS`` sigma above their
     plane, joined into patches of at least ``_RAISED_MIN_AREA`` m^2. The table's own points
     average zero; a pot's inner bottom a few millimetres above it (or a sheet lying on it)
     does not, though each of its points is within the band. Only surfaces the band decides.
-    Returns the points unlabelled."""
+    Returns the positions (grid order) unlabelled."""
+    none = np.zeros(0, np.int64)
     at = np.flatnonzero(labels >= 0)
     at = at[band.by_band[labels[at]]]
     if len(at) == 0:
-        return 0
+        return none
     # Columns within each voxel (a whole number of them per voxel edge): grouped without a
     # sort, by the voxel and the column's place in it.
     per = np.maximum(np.round(grid.size[:2] / cell).astype(np.int64), 1)
@@ -309,7 +310,7 @@ def drop_raised(
         (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
     )
     if len(raised) == 0:
-        return 0
+        return none
     # 8-connected patches of raised columns, by their global column and surface.
     v = raised // (per[0] * per[1])
     gi = grid.keys[v, 0] * per[0] + (raised // per[1]) % per[0]
@@ -331,7 +332,7 @@ def drop_raised(
     big[raised[order][area[patch] >= _RAISED_MIN_AREA]] = True
     gone = at[big[key]]
     labels[gone] = -1
-    return len(gone)
+    return gone
 
 
 # k-NN normals vet a surface's points (the clutter test) only where the neighbourhood of

@@ -76,16 +76,13 @@ def detect_surfaces(
     for s, outline in zip(surfaces, outlines, strict=True):
         s.outline = outline
     labels = np.full(len(pts), -1, dtype=np.int32)
-    if keep is None:
-        labels[grid.order] = lut[sorted_labels]
-    else:
-        used_labels = np.empty(len(used), dtype=np.int32)
-        used_labels[grid.order] = lut[sorted_labels]
-        labels[keep] = used_labels
+    rows = grid.order if keep is None else np.flatnonzero(keep)[grid.order]
+    labels[rows] = lut[sorted_labels]
+    raised = np.zeros(0, np.int64) if planar is None else np.sort(rows[planar.raised])
     stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
     if keep is not None:
         stats["normal_filter_removed"] = int(len(pts) - keep.sum())
-    return SurfaceResult(surfaces=surfaces, labels=labels, stats=stats)
+    return SurfaceResult(surfaces=surfaces, labels=labels, stats=stats, raised=raised)
 
 
 @dataclass
@@ -96,6 +93,7 @@ class _PlanarState:
     planes: _Planes
     best: np.ndarray  # (N,) each labelled point's height above its plane, grid order, m
     band: Band | None
+    raised: np.ndarray  # positions (grid order) of raised patches taken out of the band
 
 
 def _label_planar(
@@ -138,9 +136,11 @@ def _label_planar(
     sorted_labels, best, band = label_in_band(
         grid, index, surface_of_voxel, planes, tolerance, sensor_origin, params
     )
+    raised = np.zeros(0, np.int64)
     if band is not None:
         stats["band_surfaces"] = int(band.by_band.sum())
-        stats["raised_points"] = drop_raised(grid, sorted_labels, best, band, _RAISED_CELL)
+        raised = drop_raised(grid, sorted_labels, best, band, _RAISED_CELL)
+        stats["raised_points"] = len(raised)
     if params.clutter_normal_k > 0:
         vetted = _voxels_to_vet(grid, sorted_labels, surface_of_voxel, planes, absorbed, params)
         if band is not None:
@@ -148,7 +148,8 @@ def _label_planar(
         stats["clutter_points_rejected"] = _reject_tilted_clutter(
             grid, index, sorted_labels, vetted, params
         )
-    return surface_of_voxel, sorted_labels, stats, _PlanarState(index, planes, best, band)
+    state = _PlanarState(index, planes, best, band, raised)
+    return surface_of_voxel, sorted_labels, stats, state
 
 
 # Columns of this width, metres, average a band's heights for raised patches (drop_raised).

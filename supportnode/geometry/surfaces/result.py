@@ -70,3 +70,6 @@ class SurfaceResult:
     surfaces: list[Surface]
     labels: np.ndarray  # (N,) int32: surface id of each input point, -1 when on none
     stats: dict = field(default_factory=dict)  # counts for diagnostics (voxels, candidates, ...)
+    # Rows (ascending) of raised patches in a surface's noise band (a pot's inner bottom a few
+    # millimetres above the table): labelled none, and not the surface's noise either.
+    raised: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
