@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.geometry.linalg import sym3_eigen_entries
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
     Cells,
@@ -23,6 +24,7 @@ from supportnode.geometry.objects.faces import (
     orient,
     window_normals,
 )
+from supportnode.geometry.objects.stacks import cut_stacks
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.cellgraph import nearest_distances
 from supportnode.kernels.components import label_edges
@@ -60,6 +62,7 @@ def convex_segments(
     min_points: int = 30,
     sigma: float = 0.0015,
     grow: bool = True,
+    above: np.ndarray | None = None,
 ) -> np.ndarray:
     """(M,) int64 segment of each point of ``points`` (M, 3) float, metres; -1 for none.
 
@@ -68,7 +71,9 @@ def convex_segments(
     ``grow``, grown x1.5 until a typical occupied cell holds a few points), metres; normal_cells: a cell's normal comes from the cells within this many cells
     of it. smooth_deg: faces whose normals differ by less than this stay joined where they
     meet concavely. min_points: smaller segments join the neighbour they share most links
-    with. sigma: the depth noise, metres (faces do not grow across steps above it)."""
+    with. sigma: the depth noise, metres (faces do not grow across steps above it). above:
+    (M,) each point's height above the surface under it (inf over none), metres: with it,
+    objects standing on an object's top are cut apart (:mod:`stacks`)."""
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) == 0:
         return np.zeros(0, np.int64)
@@ -89,8 +94,28 @@ def convex_segments(
     seg = np.full(len(face), -1, np.int64)
     if (face >= 0).any():
         seg = _join_faces(cells, face, src, dst, normal_cells, origin, smooth_deg)
+        if above is not None:
+            count = cells.moments[:, 0]
+            cell_above = np.bincount(cells.of_point, weights=above) / count
+            up = np.abs(_face_normals(cells, face)[:, 2])
+            clearance = max(1.5 * cell, _FACE_SIGMAS * sigma)
+            seg = cut_stacks(
+                cells.centroid, count, cell_above, face, up, seg, src, dst, clearance, min_points
+            )
         seg = _absorb_small(seg, cells.moments[:, 0], src, dst, min_points)
     return seg[cells.of_point]
+
+
+def _face_normals(cells: Cells, face: np.ndarray) -> np.ndarray:
+    """(n_faces, 3) unit normal of the plane fitted to each face's points (sign arbitrary)."""
+    on = face >= 0
+    n = int(face.max()) + 1
+    mom = np.stack([np.bincount(face[on], cells.moments[on, q], n) for q in range(10)], 1)
+    count = np.maximum(mom[:, 0], 1.0)
+    mean = [mom[:, 1 + a] / count for a in range(3)]
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    entries = [mom[:, 4 + q] / count - mean[a] * mean[b] for q, (a, b) in enumerate(pairs)]
+    return sym3_eigen_entries(*entries)[1]
 
 
 def _groups(
@@ -253,6 +278,7 @@ def cluster_convex(
             min_points=params.min_points,
             sigma=float(np.median(sigma[at])),
             grow=False,
+            above=above[at],
         )
         out[at] = np.where(seg >= 0, seg + base, -1)
         base += int(seg.max()) + 1 if len(seg) else 0
