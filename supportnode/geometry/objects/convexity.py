@@ -19,6 +19,7 @@ from supportnode.geometry.linalg import sym3_eigen_entries
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
     Cells,
+    group_centroids,
     grow_faces,
     make_cells,
     orient,
@@ -84,7 +85,8 @@ def convex_segments(
         cells = make_cells(pts, cell, pad)
     src, dst = cells.grid.adjacent_pairs()
     normal, variation = window_normals(cells, normal_cells)
-    normal = orient(normal, cells.centroid, origin, _groups(cells, src, dst, origin))
+    inside = _inside(cells, src, dst, origin)
+    normal = orient(normal, cells.centroid, origin, inside)
     offset = max(_FACE_SIGMAS * sigma, cell / 3.0)
     # A noisy plane's window is not flat to zero: its least eigenvalue is sigma^2 against
     # (2w + 1)^2 cell^2 / 12 in each direction along it.
@@ -93,7 +95,7 @@ def convex_segments(
     face = grow_faces(cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS)
     seg = np.full(len(face), -1, np.int64)
     if (face >= 0).any():
-        seg = _join_faces(cells, face, src, dst, normal_cells, origin, smooth_deg)
+        seg = _join_faces(cells, face, src, dst, normal_cells, origin, inside, smooth_deg)
         if above is not None:
             count = cells.moments[:, 0]
             cell_above = np.bincount(cells.of_point, weights=above) / count
@@ -118,20 +120,14 @@ def _face_normals(cells: Cells, face: np.ndarray) -> np.ndarray:
     return sym3_eigen_entries(*entries)[1]
 
 
-def _groups(
+def _inside(
     cells: Cells, src: np.ndarray, dst: np.ndarray, origin: np.ndarray | None
 ) -> np.ndarray | None:
-    """Groups of touching cells (for normals without a sensor), None with one."""
-    return None if origin is not None else label_edges(len(cells.centroid), src, dst)
-
-
-def _group_of(
-    cells: Cells, src: np.ndarray, dst: np.ndarray, origin: np.ndarray | None, at: np.ndarray
-) -> np.ndarray | None:
-    """:func:`_groups` of the cells ``at`` (their centroids' groups' centroids stay those of
-    all the group's cells)."""
-    g = _groups(cells, src, dst, origin)
-    return None if g is None else g[at]
+    """Without a sensor, a point inside each cell's object for its normal to turn away
+    from: the centroid of its group of touching cells. None with a sensor."""
+    if origin is not None:
+        return None
+    return group_centroids(cells.centroid, label_edges(len(cells.centroid), src, dst))
 
 
 def _join_faces(
@@ -141,6 +137,7 @@ def _join_faces(
     dst: np.ndarray,
     normal_cells: int,
     origin: np.ndarray | None,
+    inside: np.ndarray | None,
     smooth_deg: float,
 ) -> np.ndarray:
     """(F,) segment of each cell (-1: none): faces joined across their convex boundaries,
@@ -155,7 +152,7 @@ def _join_faces(
     ends = np.unique(np.concatenate([s, t]))
     part, _ = window_normals(cells, normal_cells, label, ends)
     normal[ends] = orient(
-        part, cells.centroid[ends], origin, _group_of(cells, src, dst, origin, ends)
+        part, cells.centroid[ends], origin, None if inside is None else inside[ends]
     )
     d = cells.centroid[s] - cells.centroid[t]
     dist = np.linalg.norm(d, axis=1)

@@ -86,19 +86,25 @@ def orient(
     normal: np.ndarray,
     centroid: np.ndarray,
     origin: np.ndarray | None,
-    group: np.ndarray | None = None,
+    inside: np.ndarray | None = None,
 ) -> np.ndarray:
     """Normals (F, 3) turned toward the sensor at ``origin`` (3,); without one, away from
-    the centroid of each cell's ``group`` (F,) (all cells when None)."""
+    ``inside`` (F, 3), a point inside each cell's object (its group's centroid), or from
+    the centroid of all cells when None."""
     if origin is not None:
         view = np.asarray(origin, np.float64) - centroid
         flip = np.einsum("ij,ij->i", normal, view) < 0
     else:
-        g = np.zeros(len(centroid), np.int64) if group is None else group
-        n = np.bincount(g).astype(np.float64)
-        mid = np.stack([np.bincount(g, centroid[:, a]) / n for a in range(3)], axis=1)
-        flip = np.einsum("ij,ij->i", normal, centroid - mid[g]) < 0
+        mid = centroid.mean(axis=0) if inside is None else inside
+        flip = np.einsum("ij,ij->i", normal, centroid - mid) < 0
     return np.where(flip[:, None], -normal, normal)
+
+
+def group_centroids(centroid: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """(F, 3) the centroid of each cell's ``group`` (F,) of cells."""
+    n = np.maximum(np.bincount(group), 1).astype(np.float64)
+    mid = np.stack([np.bincount(group, centroid[:, a]) / n for a in range(3)], axis=1)
+    return mid[group]
 
 
 def grow_faces(
