@@ -327,8 +327,12 @@ def _cell_level(
     take = np.where(big, np.minimum(size, _SPACING_SAMPLES), 0)
     rank = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
     pick = order[np.repeat(bounds[:-1], take) + rank * np.repeat(size // np.maximum(take, 1), take)]
-    # Nearest neighbours looked for within a cell of the largest size: farther is sparse.
-    dist = nearest_distances(cp, pick, cell * _CELL_STEPS[-1])
+    # Nearest neighbours looked for within a cell of the largest size (farther is sparse),
+    # among the points of the components kept.
+    keep = np.flatnonzero(big[comp])
+    rank = np.full(len(cp), -1, np.int64)
+    rank[keep] = np.arange(len(keep))
+    dist = nearest_distances(cp[keep], rank[pick], cell * _CELL_STEPS[-1])
     owner = comp[pick]
     spacing = np.zeros(n)
     noise = np.zeros(n)

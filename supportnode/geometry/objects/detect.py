@@ -142,6 +142,8 @@ _MAX_INSIDE = 0.1
 # ... and its points lie this much above the table on average (table seen between objects
 # does not), metres.
 _MIN_RAISE = 0.002
+# The band points searched for feet lie within this of the objects' x, y box, metres.
+_AROUND = 0.05
 
 
 def _claim_feet(
@@ -164,8 +166,17 @@ def _claim_feet(
     by_band = np.zeros(len(height), dtype=bool)
     for s in surfaces.surfaces:
         by_band[s.id] = s.band[0] > 0
+    is_raised = np.zeros(len(pts), dtype=bool)
+    is_raised[surfaces.raised] = True
     on = np.flatnonzero(surfaces.labels >= 0)
     on = on[by_band[surfaces.labels[on]]]
+    # Only the band around the objects matters (and the raised patches, wherever they lie).
+    obj = cp[lab >= 0]
+    if len(obj):
+        lo, hi = obj[:, :2].min(axis=0) - _AROUND, obj[:, :2].max(axis=0) + _AROUND
+        x, y = pts[on, 0], pts[on, 1]
+        near = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+        on = on[near | is_raised[on]]
     loose = np.flatnonzero((lab < 0) & (support >= 0))
     loose = loose[by_band[support[loose]]]
     band_xyz = np.concatenate([pts[on], cp[loose]])
@@ -177,10 +188,7 @@ def _claim_feet(
     owner = claim_enclosed(
         band_xyz, band_surf, height, owner, cp, lab, cell, _MAX_INSIDE, _MIN_RAISE
     )
-    raised = np.r_[
-        np.isin(on, surfaces.raised, assume_unique=True),
-        np.isin(cand[loose], surfaces.raised, assume_unique=True),
-    ]
+    raised = np.r_[is_raised[on], is_raised[cand[loose]]]
     owner = claim_raised(
         band_xyz, owner, raised, cp, lab, 2 * cell, 3 * params.foot_reach, params.min_points
     )

@@ -29,7 +29,7 @@ _BIN_MIN_POINTS = 50
 _RAISED_SIGMAS = 1.5
 _RAISED_MIN_AREA = 0.004
 # The noise is fitted to an even sample of at most this many of the labelled points.
-_FIT_SAMPLES = 10_000
+_FIT_SAMPLES = 6_000
 # Robust sigma from the median absolute residual of a normal distribution.
 _MAD_TO_SIGMA = 1.4826
 
