@@ -34,6 +34,7 @@ from supportnode.params import ObjectParams
 _MIN_PER_CELL = 3  # median points per occupied cell
 _MAX_CELL = 0.04  # metres: the cell stops growing here (gaps of a few cm cut)
 _PAD = 3  # cells of padding: windows reach this far
+_LINK_CELLS = 1.5  # adjacent cells link when their centroids are this many cells apart at most
 # Face growth: a flat window has a surface variation below this; neighbouring cells of one
 # face have normals within this angle and lie on each other's plane within this many noise
 # sigmas (at least a third of a cell); a face holds at least this many points.
@@ -84,6 +85,10 @@ def convex_segments(
         cell *= 1.5
         cells = make_cells(pts, cell, pad)
     src, dst = cells.grid.adjacent_pairs()
+    # Adjacent cells whose points lie apart by more than a cell and a half are not linked: a
+    # gap is measured between the points, not between the cells' corners.
+    near = np.linalg.norm(cells.centroid[src] - cells.centroid[dst], axis=1) <= _LINK_CELLS * cell
+    src, dst = src[near], dst[near]
     normal, variation = window_normals(cells, normal_cells)
     inside = _inside(cells, src, dst, origin)
     normal = orient(normal, cells.centroid, origin, inside)

@@ -16,7 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
-from supportnode.geometry.surfaces.planar import _label_by_plane_of, _label_points_planar, _Planes
+from supportnode.geometry.surfaces.planar import (
+    _label_by_plane_of,
+    _label_points_planar,
+    _plane_in,
+    _Planes,
+)
 from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
 from supportnode.kernels.components import label_edges
 from supportnode.params import SurfaceParams
@@ -99,7 +104,8 @@ class Band:
     """Each surface's band: ``width(surface, voxel)`` (K,) metres for surface components
     (K,) and the grid's voxels (K,) holding the points: ``sigmas`` noise sigmas at the
     voxels' range, at least ``floor``, for the components the band decides (``by_band``,
-    (C,)); the growth's ``tolerance`` (C,) for the others (and as a ceiling)."""
+    (C,)), at most the larger of ``tolerance`` and ``ceiling``; the growth's ``tolerance``
+    (C,) for the others."""
 
     model: NoiseModel
     sigmas: float
@@ -107,6 +113,7 @@ class Band:
     r_voxel: np.ndarray | None  # (M,) range of each voxel's centre from the sensor, m
     by_band: np.ndarray
     tolerance: np.ndarray
+    ceiling: float = np.inf  # the band's widest, metres (half a voxel's height)
 
     def width(self, surface: np.ndarray, voxel: np.ndarray) -> np.ndarray:
         r = 0.0 if self.r_voxel is None else self.r_voxel[voxel]
@@ -131,9 +138,11 @@ def label_in_band(
 
     The points within the growth's ``tolerance`` (per component) measure each surface's
     noise. Where the band decides (:func:`band_decides`: a depth camera's surfaces), the
-    voxels' planes are refitted over their neighbours' inliers and the labels redone within
-    ``params.band_sigmas`` sigma at the range of each point's voxel, at least
-    ``params.band_min``, at most ``tolerance``; elsewhere ``tolerance`` stays."""
+    noise is measured again about planes refitted over each voxel's neighbours (which the
+    voxels holding clutter keep), and the labels redone within ``params.band_sigmas`` sigma
+    at the range of each point's voxel, at least ``params.band_min``, at most the larger of
+    ``tolerance`` and half a voxel's height; elsewhere ``tolerance`` stays. ``planes`` may
+    change."""
     labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
     if params.band_sigmas <= 0 or not (labels >= 0).any():
         return labels, best, None
@@ -147,10 +156,26 @@ def label_in_band(
     by_band = band_decides(grid, labels, surface_of_voxel, band, params.clutter_normal_k)
     if not by_band.any():
         return labels, best, band
-    refit_planes(grid, index, surface_of_voxel, planes, labels, by_band)
-    labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
-    model = _fit(grid, labels, best, r_voxel, len(tolerance))
-    band = Band(model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance)
+    # The noise is measured about the windows' planes (a surface straddling two layers of
+    # voxels fits each half its own plane, and its noise looks halved); those planes replace
+    # the voxels' own where clutter stands in the column (a foot tilts the plane) or the
+    # voxel's own plane leaves its window's by more than the noise (a pot's inner bottom
+    # lifts it): elsewhere a voxel's own plane follows the surface, and a far depth camera's
+    # steps, best.
+    window = _Planes(planes.mean.copy(), planes.normal.copy(), planes.roughness)
+    refit_planes(grid, index, surface_of_voxel, window, labels, by_band)
+    trial, best = _label_points_planar(grid, index, surface_of_voxel, window, tolerance)
+    model = _fit(grid, trial, best, r_voxel, len(tolerance))
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    sv = sv[by_band[surface_of_voxel[sv]]]
+    r = 0.0 if r_voxel is None else r_voxel[sv]
+    off = _miss(grid, planes, window, sv) > _OFF_SIGMAS * model.sigma(surface_of_voxel[sv], r)
+    take = np.union1d(_cluttered(grid, index, surface_of_voxel, labels), sv[off])
+    planes.mean[take] = window.mean[take]
+    planes.normal[take] = window.normal[take]
+    band = Band(
+        model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance, 0.5 * grid.size[2]
+    )
     labels, best = _label_points_planar(
         grid, index, surface_of_voxel, planes, tolerance, band.width
     )
@@ -203,6 +228,42 @@ def label_ring(
             )
     new = labels[(labels >= 0) & (before < 0)]
     return np.bincount(new, minlength=len(kept))
+
+
+# A voxel's own plane leaving its window's by more than this many noise sigmas is not the
+# surface's (see label_in_band).
+_OFF_SIGMAS = 2.0
+
+
+def _miss(grid: VoxelGrid, own: _Planes, window: _Planes, sv: np.ndarray) -> np.ndarray:
+    """(K,) the largest height difference of two planes of the voxels ``sv`` over each
+    voxel's x, y square, metres."""
+    a0, bx0, by0 = _plane_in(grid, own.mean[sv], own.normal[sv], sv)
+    a1, bx1, by1 = _plane_in(grid, window.mean[sv], window.normal[sv], sv)
+    miss = np.zeros(len(sv))
+    for cx in (0.0, grid.size[0]):
+        for cy in (0.0, grid.size[1]):
+            miss = np.maximum(miss, np.abs((a0 - a1) + (bx0 - bx1) * cx + (by0 - by1) * cy))
+    return miss
+
+
+# A surface voxel holds clutter when this share of the points in it and in the voxel above
+# it are on no surface.
+_CLUTTER_SHARE = 0.05
+
+
+def _cluttered(
+    grid: VoxelGrid, index: KeyIndex, surface_of_voxel: np.ndarray, labels: np.ndarray
+) -> np.ndarray:
+    """The surface voxels (indices) holding clutter, in them or just above them."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    off = np.add.reduceat((labels < 0).astype(np.int64), grid.starts) if len(labels) else None
+    if off is None or len(sv) == 0:
+        return np.zeros(0, np.int64)
+    (up,) = index.neighbours_many(sv, [(0, 0, 1)], grid.keys)
+    loose = off[sv] + np.where(up >= 0, off[np.maximum(up, 0)], 0)
+    total = grid.counts[sv] + np.where(up >= 0, grid.counts[np.maximum(up, 0)], 0)
+    return sv[loose >= _CLUTTER_SHARE * total]
 
 
 # The window of voxels whose inliers refit a surface voxel's plane (3 x 3 columns, +-1 layer).
@@ -274,8 +335,9 @@ def refit_planes(
     normal = np.where(normal[:, 2:3] < 0, -normal, normal)
     level = normal[:, 2] > 0.5  # a degenerate window keeps its voxel's own plane
     to = sv[fit][level]
-    planes.mean[to] = np.stack(mean, axis=1)[level]
-    planes.normal[to] = normal[level]
+    new_mean, new_normal = np.stack(mean, axis=1)[level], normal[level]
+    planes.mean[to] = new_mean
+    planes.normal[to] = new_normal
 
 
 def drop_raised(

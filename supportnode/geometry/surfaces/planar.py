@@ -249,7 +249,7 @@ def _label_points_planar(
     in its own column: its own voxel, or the one just below or above (a noisy or
     layer-straddling surface spills into neighbouring layers). index:
     ``KeyIndex.build(grid.keys)``. band: the tolerance (K,) of surfaces (K,) for the points
-    of voxels (K,) (the sensor's noise at their range), at most ``tol_by_comp``."""
+    of voxels (K,) (the sensor's noise at their range), instead of ``tol_by_comp``."""
     n = len(grid.order)
     # int32 and no (N,) float fill: fresh pages cost more here than the arithmetic on them.
     sorted_labels = np.full(n, -1, dtype=np.int32)
@@ -274,10 +274,25 @@ def _label_points_planar(
         surf_v = surface_of_voxel[t]
         tol = tol_by_comp[surf_v]
         if band is not None:
-            tol = np.minimum(band(surf_v, vsel), tol)
+            tol = band(surf_v, vsel)
         # A labelled point changes surface only for a nearer plane.
         _label_by_plane_of(grid, planes, t, vsel, surf_v, tol, sorted_labels, best, dz != 0)
     return sorted_labels, best
+
+
+def _plane_in(
+    grid: VoxelGrid, mean: np.ndarray, normal: np.ndarray, vsel: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Planes through ``mean`` (K, 3) with ``normal`` (K, 3) (z > 0) as z = a + bx lx + by ly
+    in the local frames (corner-relative) of the grid's voxels ``vsel`` (K,): (a, bx, by)."""
+    bx, by = -normal[:, 0] / normal[:, 2], -normal[:, 1] / normal[:, 2]
+    corner = grid.keys[vsel] * grid.size
+    a = (
+        (mean[:, 2] - corner[:, 2])
+        + bx * (corner[:, 0] - mean[:, 0])
+        + by * (corner[:, 1] - mean[:, 1])
+    )
+    return a, bx, by
 
 
 def _label_by_plane_of(
@@ -296,12 +311,7 @@ def _label_by_plane_of(
     # Imported here: importing the geometry (as the wire's types do) must not load numba.
     from supportnode.kernels.planes import label_by_planes
 
-    # The plane of voxel t as z = A + bx*lx + by*ly in voxel vsel's local frame.
-    nrm = planes.normal[t]
-    bx, by = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
-    corner = grid.keys[vsel] * grid.size
-    m = planes.mean[t]
-    a = (m[:, 2] - corner[:, 2]) + bx * (corner[:, 0] - m[:, 0]) + by * (corner[:, 1] - m[:, 1])
+    a, bx, by = _plane_in(grid, planes.mean[t], planes.normal[t], vsel)
     label_by_planes(
         grid.local,
         grid.starts[vsel],
