@@ -107,7 +107,7 @@ def main() -> None:
     rows = []
     for scene, n in (("shelf", 539_034), ("u_table", 300_000)):
         for label, p in (
-            ("voxel + split", ObjectParams()),
+            ("voxel + split", ObjectParams(method="voxel")),
             ("knn s=1 + split", ObjectParams(method="knn", sample_fraction=1.0, k=20)),
             ("convex + split", ObjectParams(method="convex")),
         ):

@@ -12,7 +12,7 @@ installed, the same run scores the plain Open3D tabletop pipeline (segment_plane
 > 1 cm above, cluster_dbscan eps 2 cm) and a tuned one (table band 1.2 cm, eps 7 mm).
 
 Run: python bench/real_accuracy.py [--scans ../shared/real_scans/mosd_learn] [--every 1]
-     [--set objects.method=convex] [--no-open3d] [--docs]
+     [--set objects.method=voxel] [--no-open3d] [--docs]
 """
 
 from __future__ import annotations

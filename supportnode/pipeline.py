@@ -105,6 +105,11 @@ def surfaces_stage(
     timings = {} if timings is None else timings
     t = time.perf_counter()
     components = cluster_objects(pts, surfaces, params.objects, sensor_origin=sensor_origin)
+    if len(components.claimed):
+        # An object's foot is the object's, no longer the surface's.
+        labels = surfaces.labels.copy()
+        labels[components.claimed] = -1
+        surfaces = replace(surfaces, labels=labels)
     timings["objects"] = time.perf_counter() - t
     t = time.perf_counter()
     below = surfaces
@@ -180,7 +185,7 @@ def detect(
         if memo is not None:
             memo.next_round()
         early = surfaces_stage(pts, surfaces, params, free_below, timings, sensor_origin=origin)
-        free = early.free
+        surfaces, free = early.surfaces, early.free
         if on_surfaces is not None:
             on_surfaces(surfaces, free, early.components.segmentation)
         object_result = objects_stage(early, params, memo)

@@ -430,7 +430,7 @@ def test_config_to_dict_is_plain_and_json_ready() -> None:
     cfg = DetectParams()
     d = config_to_dict(cfg)
     assert d["surfaces"]["plane_voxel"] == [0.1, 0.1, 0.05]
-    assert d["objects"]["method"] == "voxel"
+    assert d["objects"]["method"] == "convex"
     assert set(d) == {f.name for f in dataclasses.fields(DetectParams)}
     assert json.loads(json.dumps(d)) == d
     with pytest.raises(TypeError):

@@ -21,7 +21,10 @@ from supportnode.config import load_config
 from supportnode.detection.policy import is_safe
 from supportnode.pipeline import detect
 from supportnode.sim import load_scene
-from supportnode.sim.simulate import sampled
+from supportnode.sim.noise import parse_noise
+from supportnode.sim.sensors import DepthCamera
+from supportnode.sim.simulate import sampled, scans
+from supportnode.sim.trajectory import poses_for
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "config" / "default.yaml"
@@ -62,15 +65,13 @@ DETECTION_PROBES: dict[str, tuple[str, str, tuple[str, ...], bool]] = {
     "objects.split_neck_width": ("kitchen", "0.01", (), False),
     "objects.split_concave": ("shelf@539034", "true", (), False),  # dense: the report's shelf
     "objects.concave_tolerance": ("shelf@539034", "0.002", ("objects.split_concave=true",), False),
-    "objects.convex_band_sigma": ("cluttered_table", "0.006", ("objects.method=convex",), False),
-    "objects.convex_cell": ("cluttered_table", "0.02", ("objects.method=convex",), False),
-    "objects.convex_smooth_deg": ("cluttered_table", "75.0", ("objects.method=convex",), False),
-    "objects.convex_crease_curvature": (
-        "cluttered_table",
-        "2.0",
-        ("objects.method=convex",),
-        False,
-    ),
+    # The convex method's faces and the noise band act on a depth camera's dense view.
+    "objects.convex_cell": ("cluttered_table@kinect", "0.02", (), False),
+    "objects.convex_normal_cells": ("cluttered_table@kinect", "4", (), False),
+    "objects.convex_smooth_deg": ("cluttered_table@kinect", "75.0", (), False),
+    "objects.foot_reach": ("cluttered_table@kinect", "0.0", (), False),
+    "surfaces.band_sigmas": ("cluttered_table@kinect", "0.0", (), False),
+    "surfaces.band_min": ("cluttered_table@kinect", "0.008", (), False),
     "freespace.cell_size": ("kitchen", "0.08", (), False),
     "freespace.margin": ("kitchen", "0.2", (), False),
     "gravity.up_hint": ("kitchen", "[1.0, 0.0, 0.0]", (), True),
@@ -142,15 +143,23 @@ def test_every_key_is_shown_to_matter() -> None:
 
 
 @cache
-def _cloud(scene: str) -> np.ndarray:
-    """A bundled scene sampled by area: "NAME" (40,000 points) or "NAME@POINTS"."""
+def _cloud(scene: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """A bundled scene sampled by area: "NAME" (40,000 points) or "NAME@POINTS"; or seen by
+    a Kinect with its noise, "NAME@kinect". Points (N, 3) and the sensor's position."""
     name, _, points = scene.partition("@")
-    return sampled(load_scene(name), int(points or 40_000), seed=0).points.astype(np.float64)
+    if points == "kinect":
+        s = load_scene(name)
+        camera = DepthCamera.preset("kinect")
+        view = scans(s, camera, poses_for(s, 1, level=False), 0, parse_noise(["kinect"]))[0]
+        return view.points.astype(np.float64), view.sensor_pose[:3, 3]
+    cloud = sampled(load_scene(name), int(points or 40_000), seed=0)
+    return cloud.points.astype(np.float64), None
 
 
 def _signature(scene: str, settings: tuple[str, ...], align: bool) -> tuple:
     params = load_config(None, settings)
-    det = detect(_cloud(scene), params, align=align)
+    pts, origin = _cloud(scene)
+    det = detect(pts, params, align=align, sensor_origin=origin)
     safe = tuple(is_safe(s, params.safe) for s in det.surfaces.surfaces)
     free = tuple(round(f.free_area, 6) for f in det.free_space)
     objects = det.objects.labels.tobytes() if det.objects is not None else b""

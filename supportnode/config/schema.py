@@ -36,6 +36,10 @@ REMOVED_KEYS: dict[str, str] = {
     "node.queue": "removed in 0.2: the node keeps the latest scan, " + _NOTHING_TO_SET,
     # read by nothing: the point normals that surfaces use have their own neighbour counts
     "normals": "removed in 0.2: use surfaces.normal_filter_k and surfaces.clutter_normal_k",
+    "objects.convex_band_sigma": "removed in 0.2: the band over a surface is the surface's "
+    "measured noise band; use surfaces.band_sigmas and surfaces.band_min",
+    "objects.convex_crease_curvature": "removed in 0.2: the convex method judges creases "
+    "between smooth faces; " + _NOTHING_TO_SET,
 }
 
 # Keys renamed for what they are (four keys were all called voxel_size): old -> new dotted key.

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from supportnode.errors import InputError
 
@@ -131,7 +132,7 @@ class KeyIndex:
         return self.find(keys[voxels] + off)
 
     def neighbours_many(
-        self, voxels: np.ndarray, offsets: np.ndarray, keys: np.ndarray
+        self, voxels: np.ndarray, offsets: npt.ArrayLike, keys: np.ndarray
     ) -> np.ndarray:
         """:meth:`neighbours` of the (Q,) ``voxels`` at each of (K, 3) ``offsets`` in one
         vectorised lookup: (K, Q) int64, -1 where absent."""

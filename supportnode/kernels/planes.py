@@ -33,10 +33,11 @@ def _label(
         ap, bxp, byp, lab, t = a[p], bx[p], by[p], label[p], tol[p]
         for j in range(first[p], first[p] + count[p]):
             # The same operations in the same order as numpy's: the same bits.
-            d = abs(lz[j] - (ap + bxp * lx[j] + byp * ly[j]))
-            if d <= t and not (nearer and labels[j] >= 0 and not d < best[j]):
+            r = lz[j] - (ap + bxp * lx[j] + byp * ly[j])
+            d = abs(r)
+            if d <= t and not (nearer and labels[j] >= 0 and not d < abs(best[j])):
                 labels[j] = lab
-                best[j] = d
+                best[j] = r
 
 
 def label_by_planes(
@@ -56,8 +57,8 @@ def label_by_planes(
     covers points ``first[p] : first[p] + count[p]`` (runs do not overlap), its plane is
     z = a + bx x + by y with ``plane = (a, bx, by)``, each (P,) float64. label: (P,) int,
     tol: (P,) float64 m. A point within tolerance takes the run's label into ``labels`` ((N,)
-    int32) and its distance into ``best`` ((N,) float64); with ``nearer`` a labelled point
-    (labels >= 0) only for a smaller distance than ``best``. Raises ValueError on shapes,
+    int32) and its height above the plane into ``best`` ((N,) float64, signed); with
+    ``nearer`` a labelled point (labels >= 0) only for a smaller distance than ``|best|``. Raises ValueError on shapes,
     dtypes, runs outside the points or non-finite planes.
     """
     lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)

@@ -62,7 +62,20 @@ class SurfaceParams:
     point_tolerance: float = param(
         0.01,
         "planar: a point is on a surface if this close to the surface's local plane "
-        "(widened to 3x the surface's median voxel roughness on noisy clouds)",
+        "(widened to 3x the surface's median voxel roughness on noisy clouds); a depth "
+        "camera's surfaces use their noise band instead (band_sigmas), at most this wide",
+        "m",
+        min=0.0,
+    )
+    band_sigmas: float = param(
+        3.5,
+        "planar: a point is on a surface within this many sigma of its plane, sigma the "
+        "surface's own noise at the point's range (measured on it; 0: point_tolerance alone)",
+        min=0.0,
+    )
+    band_min: float = param(
+        0.003,
+        "planar: the noise band is never thinner than this (noise-free clouds)",
         "m",
         min=0.0,
     )
@@ -89,8 +102,8 @@ class SurfaceParams:
     clutter_normal_k: int = param(
         10,
         "planar: neighbours for the normals that vet surface points in cluttered voxels "
-        "(tilted by more than normal_filter_max_tilt_deg: not on the surface)",
-        min=3,
+        "(tilted by more than normal_filter_max_tilt_deg: not on the surface); 0: no vetting",
+        min=0,
         max=100,
     )
     normal_filter: bool = param(
@@ -135,25 +148,17 @@ class SurfaceParams:
         min=0.0,
     )
 
-    @property
-    def voxel_size(self) -> tuple[float, float, float]:
-        """`plane_voxel` under its name before 0.2 (the key ``surfaces.voxel_size`` is an error).
-
-        Read only by code being rewritten elsewhere (geometry/surfaces/planar.py, clutter.py);
-        goes once they read ``plane_voxel``.
-        """
-        return self.plane_voxel
-
 
 @dataclass(frozen=True)
 class ObjectParams:
     """Supported-object segmentation (Algorithm 2 of the report and the voxel default)."""
 
     method: str = param(
-        "voxel",
+        "convex",
         "'knn': the report's Algorithm 2 (sampled k-NN graph); 'voxel': connected "
-        "occupied voxels of a fine grid, no sampling; 'convex': patches joined where they "
-        "meet convexly or smoothly, cut at concave creases (touching and stacked objects)",
+        "occupied voxels of a fine grid, no sampling; 'convex': as voxel, then the densely "
+        "sampled groups (a depth camera's) split into smooth faces joined where they meet "
+        "convexly, cut at concave creases (touching and stacked objects)",
         choices=("knn", "voxel", "convex"),
     )
     k: int = param(20, "knn: neighbours linked per sampled point", min=1, max=500)
@@ -196,31 +201,32 @@ class ObjectParams:
     )
     convex_cell: float = param(
         0.005,
-        "convex: points in 26-adjacent cells this wide are linked (wider gaps cut); the "
-        "patches are two cells wide",
+        "convex: points in 26-adjacent cells this wide are linked (wider gaps cut); grown "
+        "until a typical cell holds a few points (sparse clouds, maps)",
         "m",
         min=1e-3,
         max=0.1,
     )
+    convex_normal_cells: int = param(
+        2,
+        "convex: a cell's normal comes from the cells within this many cells of it (a "
+        "depth camera's noise and depth steps scatter a one-cell normal)",
+        min=1,
+        max=6,
+    )
     convex_smooth_deg: float = param(
         25.0,
-        "convex: neighbouring patches whose normals differ by less than this stay linked "
-        "where they meet concavely (a bowl's inside)",
+        "convex: faces whose normals differ by less than this stay joined where they meet "
+        "concavely (a bowl's inside)",
         "deg",
         min=0.0,
         max=90.0,
     )
-    convex_crease_curvature: float = param(
-        20.0,
-        "convex: a patch hollow toward the sensor by more than this curvature straddles a "
-        "concave crease and links nothing (it joins a neighbouring segment)",
-        "1/m",
-        min=0.0,
-    )
-    convex_band_sigma: float = param(
-        1.5e-3,
-        "convex: depth noise per squared metre of range (Kinect ~1.5e-3); points within 3 "
-        "sigma of the plane of the surface under them belong to it, never to an object",
+    foot_reach: float = param(
+        0.015,
+        "the points of a surface's noise band under an object go to the object where the "
+        "object comes down to within this of the surface over them (its foot); 0: none",
+        "m",
         min=0.0,
     )
     concave_tolerance: float = param(
@@ -230,15 +236,6 @@ class ObjectParams:
         min=0.0,
         max=2.0,
     )
-
-    @property
-    def voxel_size(self) -> float:
-        """`cluster_cell` under its name before 0.2 (the key ``objects.voxel_size`` is an error).
-
-        Read only by code being rewritten elsewhere (geometry/objects/); goes once it reads
-        ``cluster_cell``.
-        """
-        return self.cluster_cell
 
 
 @dataclass(frozen=True)

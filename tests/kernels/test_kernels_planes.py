@@ -19,14 +19,15 @@ def _reference(local, first, count, plane, label, tol, labels, best, nearer):
     pos = np.concatenate([np.arange(f, f + c) for f, c in zip(first, count, strict=True)] or [[]])
     pos = pos.astype(np.int64)
     rep = [np.repeat(x, count) for x in (a, bx, by, tol, label)]
-    dist = np.abs(lz[pos] - (rep[0] + rep[1] * lx[pos] + rep[2] * ly[pos]))
+    residual = lz[pos] - (rep[0] + rep[1] * lx[pos] + rep[2] * ly[pos])
+    dist = np.abs(residual)
     better = dist <= rep[3]
     if nearer:
         seen = np.flatnonzero(better & (labels[pos] >= 0))
-        better[seen] = dist[seen] < best[pos[seen]]
+        better[seen] = dist[seen] < np.abs(best[pos[seen]])
     at = pos[better]
     labels[at] = rep[4][better]
-    best[at] = dist[better]
+    best[at] = residual[better]
     return labels, best
 
 
@@ -50,7 +51,7 @@ def test_labels_match_the_vectorised_rule_bit_for_bit(n, runs, nearer, tol, seed
     label = rng.integers(0, 5, runs)
     tols = np.full(runs, tol) * rng.uniform(0.5, 1.5, runs)
     labels = np.where(rng.random(n) < 0.3, rng.integers(0, 5, n), -1).astype(np.int32)
-    best = np.where(labels >= 0, rng.uniform(0, 0.05, n), np.nan)
+    best = np.where(labels >= 0, rng.uniform(-0.05, 0.05, n), np.nan)
     want_labels, want_best = _reference(
         local, first, count, plane, label, tols, labels, best, nearer
     )

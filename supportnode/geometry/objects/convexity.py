@@ -1,207 +1,226 @@
-"""Objects as faces joined by convex boundaries (local convexity, after LCCP: Stein et al., 2014).
+"""Objects as smooth faces joined across convex boundaries (local convexity, after LCCP:
+Stein et al., CVPR 2014).
 
-Small patches (voxels with their moments and normals) are linked where their points touch
-(fine cells 26-adjacent: a gap wider than a fine cell cuts), and a link is kept only where
-the two patches meet convexly (normals diverging along the vector between the centroids) or
-smoothly (a small angle between the normals: a bowl's concave inside stays whole); sharp
-concave creases (a box on a box, two boxes face to face, a can against a box, an object on
-its table) are cut. The segments are the connected components of the kept links. Works on
-unorganised points (a merged map has no image grid). Pure: numpy in, labels out.
+The points on no surface fall in fine cells (:mod:`faces`); cells grow into smooth faces,
+and faces meet along boundaries of adjacent cells. Each boundary link votes with the two
+faces' own normals on its sides: convex where the normals diverge along the vector between
+the cells, concave where they converge by more than the smoothness angle (a bowl's inside
+curves gently and stays whole). Faces join across boundaries whose links are mostly not
+concave: a box on a box, two boxes face to face, a can against a box come apart at their
+creases, while a box's faces, a can's lid and side, stay one. A gap wider than a cell cuts.
+Works on unorganised points (a merged map has no image grid). Pure: numpy in, labels out.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from supportnode.geometry.linalg import sym3_eigen
-from supportnode.geometry.objects.neighbours import FORWARD_26
+from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.objects.clusters import _cluster_voxel
+from supportnode.geometry.objects.faces import (
+    Cells,
+    group_centroids,
+    grow_faces,
+    make_cells,
+    orient,
+    window_normals,
+)
+from supportnode.geometry.objects.stacks import cut_stacks
+from supportnode.geometry.surfaces import Surface
+from supportnode.kernels.cellgraph import nearest_distances
 from supportnode.kernels.components import label_edges
+from supportnode.params import ObjectParams
 
-_MIN_PER_CELL = 3  # median points per occupied fine cell
-_MAX_CELL = 0.04  # metres: the grid stops growing here (gaps of a few cm cut)
+_MIN_PER_CELL = 3  # median points per occupied cell
+_MAX_CELL = 0.04  # metres: the cell stops growing here (gaps of a few cm cut)
+_PAD = 3  # cells of padding: windows reach this far
+_LINK_CELLS = 1.5  # adjacent cells link when their centroids are this many cells apart at most
+# Face growth: a flat window has a surface variation below this; neighbouring cells of one
+# face have normals within this angle and lie on each other's plane within this many noise
+# sigmas (at least a third of a cell); a face holds at least this many points.
+_FLAT = 0.04
+_FLAT_NOISE = 2.0  # times a noisy plane's own surface variation
+_FACE_DEG = 15.0
+_FACE_SIGMAS = 3.0
+_FACE_MIN_POINTS = 20
+# LCCP's tolerance for noise in the convexity measure (n_a - n_b) . d, and the share of a
+# boundary's links that must be concave for it to separate its faces.
+_CONVEX_TOL = 0.05
+# The band over a surface that measured no noise (the seed method), metres.
+_FALLBACK_BAND = 0.005
+_CONCAVE_SHARE = 0.3
+# Boundaries of at least this many links join faces first; then segments join across all
+# their boundaries pooled, for up to this many rounds (see _vote).
+_STRONG_LINKS = 20
+_VOTE_ROUNDS = 4
 
 
 def convex_segments(
     points: np.ndarray,
     origin: np.ndarray | None,
-    fine: float = 0.005,
-    ratio: int = 2,
+    cell: float = 0.005,
+    normal_cells: int = 2,
     smooth_deg: float = 25.0,
-    convex_tol: float = 0.05,
     min_points: int = 30,
-    crease_curvature: float = 20.0,
+    sigma: float = 0.0015,
+    grow: bool = True,
+    above: np.ndarray | None = None,
 ) -> np.ndarray:
     """(M,) int64 segment of each point of ``points`` (M, 3) float, metres; -1 for none.
 
-    origin: (3,) sensor position (normals turn toward it), None: normals turn away from the
-    points' centroid. fine: cell edge whose adjacency links points, metres (a gap wider than
-    it cuts); ratio: patch edge in fine cells. smooth_deg: neighbouring patches whose normals
-    differ by less than this stay linked even where they meet concavely. convex_tol: how far
-    below zero the convexity measure ``(n_i - n_j) . d_ij / |d_ij|`` may fall for noise.
-    Segments smaller than ``min_points`` join the neighbour they share the most links with.
-    crease_curvature: 1/m; a patch hollow by more than this toward the sensor is a crease.
-    """
+    origin: (3,) sensor position (normals turn toward it), None: each group of touching
+    cells turns its normals away from its centroid. cell: edge of the fine cells (with
+    ``grow``, grown x1.5 until a typical occupied cell holds a few points), metres; normal_cells: a cell's normal comes from the cells within this many cells
+    of it. smooth_deg: faces whose normals differ by less than this stay joined where they
+    meet concavely. min_points: smaller segments join the neighbour they share most links
+    with. sigma: the depth noise, metres (faces do not grow across steps above it). above:
+    (M,) each point's height above the surface under it (inf over none), metres: with it,
+    objects standing on an object's top are cut apart (:mod:`stacks`)."""
     pts = np.asarray(points, dtype=np.float64)
     if len(pts) == 0:
         return np.zeros(0, np.int64)
-    fine_of, fine_keys, dims = _cells(pts, fine)
-    # Cells follow the point spacing: a sparse cloud (a sampled map, a far lidar return) has
-    # too few points per cell for its surfaces to touch, so the cell grows until a typical
-    # occupied cell holds a few points (a surface sampled at half the cell or finer).
-    while np.median(np.bincount(fine_of)) < _MIN_PER_CELL and fine < _MAX_CELL:
-        fine *= 1.5
-        fine_of, fine_keys, dims = _cells(pts, fine)
-    patch_of_fine = _patch_ids(fine_keys, dims, ratio)
-    patch = patch_of_fine[fine_of]
-    n_patch = int(patch_of_fine.max()) + 1
-    src, dst = _patch_links(fine_keys, dims, patch_of_fine)
-    centroid, normal, count = _moments(pts, patch, n_patch, src, dst)
-    view = (pts.mean(axis=0) if origin is None else np.asarray(origin, np.float64)) - centroid
-    flip = np.einsum("ij,ij->i", normal, view) < 0
-    if origin is None:
-        flip = ~flip  # away from the centroid
-    normal[flip] *= -1.0
-    keep = _keep_links(centroid, normal, src, dst, smooth_deg, convex_tol)
-    # A patch straddling a concave crease has a normal between its two faces and links
-    # "convexly" to both where the crease ends beside an occluded face: such patches link
-    # nothing, and join a neighbouring segment afterwards.
-    crease = _concavity(pts, patch, centroid, normal, count) > crease_curvature
-    keep &= ~(crease[src] | crease[dst])
-    comp = label_edges(n_patch, src[keep], dst[keep])
-    size = np.bincount(comp, weights=count).astype(np.int64)
-    small = size < min_points
-    small[comp[crease]] = True
-    comp = _absorb_small(comp, small, src, dst)
-    return comp[patch]
+    pad = max(_PAD, normal_cells + 1)
+    cells = make_cells(pts, cell, pad)
+    while grow and np.median(cells.moments[:, 0]) < _MIN_PER_CELL and cell < _MAX_CELL:
+        cell *= 1.5
+        cells = make_cells(pts, cell, pad)
+    src, dst = cells.grid.adjacent_pairs()
+    # Adjacent cells whose points lie apart by more than a cell and a half are not linked: a
+    # gap is measured between the points, not between the cells' corners.
+    near = np.linalg.norm(cells.centroid[src] - cells.centroid[dst], axis=1) <= _LINK_CELLS * cell
+    src, dst = src[near], dst[near]
+    normal, variation = window_normals(cells, normal_cells)
+    inside = _inside(cells, src, dst, origin)
+    normal = orient(normal, cells.centroid, origin, inside)
+    offset = max(_FACE_SIGMAS * sigma, cell / 3.0)
+    # A noisy plane's window is not flat to zero: its least eigenvalue is sigma^2 against
+    # (2w + 1)^2 cell^2 / 12 in each direction along it.
+    width = (2 * normal_cells + 1) * cell
+    flat = max(_FLAT, _FLAT_NOISE * sigma**2 / (width**2 / 6.0))
+    face = grow_faces(cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS)
+    seg = np.full(len(face), -1, np.int64)
+    if (face >= 0).any():
+        seg = _join_faces(cells, face, src, dst, normal_cells, origin, inside, smooth_deg)
+        if above is not None:
+            count = cells.moments[:, 0]
+            cell_above = np.bincount(cells.of_point, weights=above) / count
+            up = np.abs(_face_normals(cells, face)[:, 2])
+            clearance = max(1.5 * cell, _FACE_SIGMAS * sigma)
+            seg = cut_stacks(
+                cells.centroid, count, cell_above, face, up, seg, src, dst, clearance, min_points
+            )
+        seg = _absorb_small(seg, cells.moments[:, 0], src, dst, min_points)
+    return seg[cells.of_point]
 
 
-def _concavity(
-    pts: np.ndarray, patch: np.ndarray, centroid: np.ndarray, normal: np.ndarray, count: np.ndarray
-) -> np.ndarray:
-    """(P,) curvature of each patch toward its normal, 1/m (> 0: a hollow facing the sensor,
-    as at a concave crease; ~0 on a face): the least-squares k of h = k r^2 / 2 over its
-    points (h their height over the patch plane, r their distance from the centroid in it)."""
-    n = len(count)
-    off = pts - centroid[patch]
-    h = np.einsum("ij,ij->i", off, normal[patch])
-    r2 = np.einsum("ij,ij->i", off, off) - h * h
-    mr2 = np.bincount(patch, r2, n) / count
-    dr2 = r2 - mr2[patch]
-    cov = np.bincount(patch, h * dr2, n)
-    var = np.bincount(patch, dr2 * dr2, n)
-    return np.where((count >= 6) & (var > 0), 2.0 * cov / np.where(var > 0, var, 1.0), 0.0)
+def _face_normals(cells: Cells, face: np.ndarray) -> np.ndarray:
+    """(n_faces, 3) unit normal of the plane fitted to each face's points (sign arbitrary)."""
+    on = face >= 0
+    n = int(face.max()) + 1
+    mom = np.stack([np.bincount(face[on], cells.moments[on, q], n) for q in range(10)], 1)
+    count = np.maximum(mom[:, 0], 1.0)
+    mean = [mom[:, 1 + a] / count for a in range(3)]
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    entries = [mom[:, 4 + q] / count - mean[a] * mean[b] for q, (a, b) in enumerate(pairs)]
+    return sym3_eigen_entries(*entries)[1]
 
 
-def _cells(pts: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each point's fine cell (M,), the cells' packed keys (F,) sorted, and the grid's dims."""
-    ijk = np.floor((pts - pts.min(axis=0)) / size).astype(np.int64) + 1  # 1-cell margin
-    dims = ijk.max(axis=0) + 2
-    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    keys, inverse = np.unique(key, return_inverse=True)
-    return inverse.reshape(-1), keys, dims
+def _inside(
+    cells: Cells, src: np.ndarray, dst: np.ndarray, origin: np.ndarray | None
+) -> np.ndarray | None:
+    """Without a sensor, a point inside each cell's object for its normal to turn away
+    from: the centroid of its group of touching cells. None with a sensor."""
+    if origin is not None:
+        return None
+    return group_centroids(cells.centroid, label_edges(len(cells.centroid), src, dst))
 
 
-def _unpack(keys: np.ndarray, dims: np.ndarray) -> np.ndarray:
-    z = keys % dims[2]
-    y = (keys // dims[2]) % dims[1]
-    return np.stack([keys // (dims[1] * dims[2]), y, z], axis=1)
-
-
-def _patch_ids(fine_keys: np.ndarray, dims: np.ndarray, ratio: int) -> np.ndarray:
-    """(F,) patch id of each fine cell: the coarse cell ``ratio`` fine cells wide holding it."""
-    coarse = _unpack(fine_keys, dims) // ratio
-    cdims = coarse.max(axis=0) + 1
-    ckey = (coarse[:, 0] * cdims[1] + coarse[:, 1]) * cdims[2] + coarse[:, 2]
-    return np.unique(ckey, return_inverse=True)[1].reshape(-1)
-
-
-def _patch_links(
-    fine_keys: np.ndarray, dims: np.ndarray, patch_of_fine: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Unique pairs (src < dst) of patches holding 26-adjacent occupied fine cells."""
-    steps = (FORWARD_26[:, 0] * dims[1] + FORWARD_26[:, 1]) * dims[2] + FORWARD_26[:, 2]
-    a_all, b_all = [], []
-    for step in steps:
-        want = fine_keys + step
-        at = np.searchsorted(fine_keys, want)
-        at_c = np.minimum(at, len(fine_keys) - 1)
-        hit = fine_keys[at_c] == want
-        a_all.append(patch_of_fine[np.flatnonzero(hit)])
-        b_all.append(patch_of_fine[at_c[hit]])
-    a, b = np.concatenate(a_all), np.concatenate(b_all)
-    differ = a != b
-    lo, hi = np.minimum(a, b)[differ], np.maximum(a, b)[differ]
-    pair = np.unique(lo * (int(patch_of_fine.max()) + 1) + hi)
-    n = int(patch_of_fine.max()) + 1
-    return pair // n, pair % n
-
-
-def _moments(
-    pts: np.ndarray, patch: np.ndarray, n: int, src: np.ndarray, dst: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroids (P, 3), unit normals (P, 3) and point counts (P,) of the patches. A patch of
-    fewer than 6 points takes its normal from itself and its linked neighbours together."""
-    count = np.bincount(patch, minlength=n).astype(np.float64)
-    s1 = np.stack([np.bincount(patch, pts[:, k], n) for k in range(3)], axis=1)
-    s2 = np.empty((n, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            s2[:, i, j] = s2[:, j, i] = np.bincount(patch, pts[:, i] * pts[:, j], n)
-    centroid = s1 / count[:, None]
-    small = count < 6
-    if small.any() and len(src):
-        c2, t1, t2 = count.copy(), s1.copy(), s2.copy()
-        for a, b in ((src, dst), (dst, src)):
-            np.add.at(c2, a, count[b])
-            np.add.at(t1, a, s1[b])
-            np.add.at(t2, a, s2[b])
-        count_n = np.where(small, c2, count)
-        s1n = np.where(small[:, None], t1, s1)
-        s2n = np.where(small[:, None, None], t2, s2)
-    else:
-        count_n, s1n, s2n = count, s1, s2
-    mean = s1n / count_n[:, None]
-    cov = s2n / count_n[:, None, None] - mean[:, :, None] * mean[:, None, :]
-    normal = _smallest_vector(cov)
-    return centroid, normal, count
-
-
-def _smallest_vector(cov: np.ndarray) -> np.ndarray:
-    """(P, 3) unit eigenvector of the smallest eigenvalue of each (P, 3, 3) symmetric matrix."""
-    vec = sym3_eigen(cov)[1]
-    norm = np.linalg.norm(vec, axis=1, keepdims=True)
-    return vec / np.where(norm > 0, norm, 1.0)
-
-
-def _keep_links(
-    centroid: np.ndarray,
-    normal: np.ndarray,
+def _join_faces(
+    cells: Cells,
+    face: np.ndarray,
     src: np.ndarray,
     dst: np.ndarray,
+    normal_cells: int,
+    origin: np.ndarray | None,
+    inside: np.ndarray | None,
     smooth_deg: float,
-    convex_tol: float,
 ) -> np.ndarray:
-    """(E,) bool: the links whose patches meet convexly or smoothly (LCCP's criterion)."""
-    d = centroid[src] - centroid[dst]
+    """(F,) segment of each cell (-1: none): faces joined across their convex boundaries,
+    judged with each cell's normal taken from its own face's cells (both sides of a crease
+    keep their face's normal, not the blend of the two)."""
+    fa, fb = face[src], face[dst]
+    on = (fa >= 0) & (fb >= 0) & (fa != fb)
+    s, t = src[on], dst[on]
+    # Normals are needed only on the boundaries: their cells' windows, over their own face.
+    label = np.where(face >= 0, face, -2 - np.arange(len(face)))
+    normal = np.zeros((len(face), 3))
+    ends = np.unique(np.concatenate([s, t]))
+    part, _ = window_normals(cells, normal_cells, label, ends)
+    normal[ends] = orient(
+        part, cells.centroid[ends], origin, None if inside is None else inside[ends]
+    )
+    d = cells.centroid[s] - cells.centroid[t]
     dist = np.linalg.norm(d, axis=1)
-    d = d / np.where(dist > 0, dist, 1.0)[:, None]
-    convexity = np.einsum("ij,ij->i", normal[src] - normal[dst], d)
-    smooth = np.einsum("ij,ij->i", normal[src], normal[dst]) > np.cos(np.radians(smooth_deg))
-    return smooth | (convexity > -convex_tol)
+    d /= np.where(dist > 0, dist, 1.0)[:, None]
+    convexity = np.einsum("ij,ij->i", normal[s] - normal[t], d)
+    smooth = np.einsum("ij,ij->i", normal[s], normal[t]) >= np.cos(np.radians(smooth_deg))
+    concave = (convexity < -_CONVEX_TOL) & ~smooth
+    n_face = int(face.max()) + 1
+    lo, hi = np.minimum(fa[on], fb[on]), np.maximum(fa[on], fb[on])
+    pair, inv = np.unique(lo * n_face + hi, return_inverse=True)
+    links = np.bincount(inv.reshape(-1), minlength=len(pair))
+    n_concave = np.bincount(inv.reshape(-1), weights=concave, minlength=len(pair))
+    seg_of_face = _vote(n_face, pair // n_face, pair % n_face, links, n_concave)
+    return np.where(face >= 0, seg_of_face[np.maximum(face, 0)], -1)
+
+
+def _vote(
+    n: int, a: np.ndarray, b: np.ndarray, links: np.ndarray, concave: np.ndarray
+) -> np.ndarray:
+    """(n,) segment of each face from its boundaries (a, b, links, concave links; (B,)).
+
+    Long boundaries speak first: faces joined across those of at least _STRONG_LINKS links
+    that are mostly convex. The segments so made then join across all that lies between
+    them, their boundaries' links pooled: a crease of a few links (where a box's face meets
+    the corner of the box it stands on) cannot join what a long concave crease parts."""
+    convex = concave < _CONCAVE_SHARE * links
+    strong = links >= _STRONG_LINKS
+    seg = label_edges(n, a[strong & convex], b[strong & convex])
+    for _ in range(_VOTE_ROUNDS):
+        sa, sb = np.minimum(seg[a], seg[b]), np.maximum(seg[a], seg[b])
+        between = sa != sb
+        if not between.any():
+            break
+        key, inv = np.unique(sa[between] * n + sb[between], return_inverse=True)
+        pooled = np.bincount(inv.reshape(-1), weights=links[between])
+        pooled_concave = np.bincount(inv.reshape(-1), weights=concave[between])
+        join = pooled_concave < _CONCAVE_SHARE * pooled
+        if not join.any():
+            break
+        seg = label_edges(n, key[join] // n, key[join] % n)[seg]
+    return seg
 
 
 def _absorb_small(
-    comp: np.ndarray, small: np.ndarray, src: np.ndarray, dst: np.ndarray
+    seg: np.ndarray, count: np.ndarray, src: np.ndarray, dst: np.ndarray, min_points: int
 ) -> np.ndarray:
-    """The small segments (small: (S,) bool) join the other segment they share the most links
-    with (crease patches, slivers with mixed normals); those with no such neighbour stay."""
-    if not small.any() or len(src) == 0:
-        return comp
-    a, b = comp[src], comp[dst]
-    a, b = np.concatenate([a, b]), np.concatenate([b, a])
+    """Segments of fewer than ``min_points`` points (count: (F,) points per cell) join the
+    other segment they share the most links with (slivers along a crease); those with no
+    such neighbour stay."""
+    on = seg >= 0
+    if not on.any():
+        return seg
+    size = np.bincount(seg[on], weights=count[on])
+    small = size < min_points
+    if not small.any():
+        return seg
+    a = np.concatenate([seg[src], seg[dst]])
+    b = np.concatenate([seg[dst], seg[src]])
+    pick = (a >= 0) & (b >= 0) & (a != b)
+    a, b = a[pick], b[pick]
     pick = small[a] & ~small[b]
     if not pick.any():
-        return comp
+        return seg
     n = len(small)
     pair, votes = np.unique(a[pick] * n + b[pick], return_counts=True)
     order = np.lexsort((-votes, pair // n))
@@ -210,39 +229,149 @@ def _absorb_small(
     best = pair[order][first]
     target = np.arange(n)
     target[best // n] = best % n
-    return target[comp]
+    return np.where(on, target[np.maximum(seg, 0)], -1)
 
 
 def cluster_convex(
     cp: np.ndarray,
-    surfaces: list,
+    surfaces: list[Surface],
     support: np.ndarray,
-    params,
+    params: ObjectParams,
     origin: np.ndarray | None,
     stats: dict,
 ) -> np.ndarray:
-    """(M,) int64 convex segment of each candidate point cp (M, 3), metres, z up; -1 for the
-    points in the noise band of the surface under them (support: (M,) its id, -1 for none):
-    those are the table's and must never link two objects. The band is 3 sigma of the depth
-    noise at the point's range (``params.convex_band_sigma * r**2``), at least 3 mm, at most
-    2 cm; the range is 1 m when the sensor is not known."""
-    height = {s.id: s.height for s in surfaces}
-    h = np.array([height.get(int(k), -np.inf) for k in range(int(support.max()) + 1)] or [0.0])
-    above = np.full(len(cp), np.inf)
-    on = support >= 0
-    above[on] = cp[on, 2] - h[support[on]]
-    r2 = 1.0 if origin is None else np.sum((cp - np.asarray(origin, float)) ** 2, axis=1)
-    band = np.clip(3.0 * params.convex_band_sigma * r2, 0.003, 0.02)
-    free = np.flatnonzero(above > band)
-    stats["band_points"] = int(len(cp) - len(free))
-    lab = np.full(len(cp), -1, np.int64)
-    lab[free] = convex_segments(
-        cp[free],
-        origin,
-        fine=params.convex_cell,
-        smooth_deg=params.convex_smooth_deg,
-        min_points=params.min_points,
-        crease_curvature=params.convex_crease_curvature,
+    """(M,) int64 segment of each candidate point cp (M, 3), metres, z up; -1 for none.
+
+    The candidates' connected voxels (:func:`clusters._cluster_voxel`, as the voxel method)
+    that are sampled densely enough to show faces (a depth camera's view: a cell of
+    ``convex_cell``, or 1.5 or 2.25 times it, wide against the points' spacing and noise)
+    are segmented by local convexity on cells of that size; sparser ones (a lidar's far
+    returns, a thinly sampled map) stay whole, to be split by their footprints. In the dense
+    ones the points in the noise band of the surface under them (support: (M,) its id, -1
+    for none) are the table's and never link two objects: the surface's own band
+    (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
+    comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
+    above, band, sigma = _band(cp, support, surfaces, origin)
+    level, window = _cell_level(
+        cp, comp, sigma, params.convex_cell, params.convex_normal_cells, params.min_points
     )
-    stats["voxels"] = int(lab.max() + 1) if len(lab) else 0
-    return lab
+    dense = level < len(_CELL_STEPS)
+    stats["dense_components"] = int(dense.sum())
+    out = np.where(dense[comp], -1, comp)
+    _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
+    if not dense.any():
+        return out
+    free = dense[comp] & (above > band)
+    stats["band_points"] = int((dense[comp] & ~free).sum())
+    base = int(out.max()) + 1 if (out >= 0).any() else 0
+    # One segmentation per cell size and normal window (a few: near and far objects).
+    for k, w in sorted(
+        {(int(a), int(b)) for a, b in zip(level[dense], window[dense], strict=True)}
+    ):
+        at = np.flatnonzero(free & (level[comp] == k) & (window[comp] == w))
+        if len(at) == 0:
+            continue
+        seg = convex_segments(
+            cp[at],
+            origin,
+            cell=params.convex_cell * _CELL_STEPS[k],
+            normal_cells=w,
+            smooth_deg=params.convex_smooth_deg,
+            min_points=params.min_points,
+            sigma=float(np.median(sigma[at])),
+            grow=False,
+            above=above[at],
+        )
+        out[at] = np.where(seg >= 0, seg + base, -1)
+        base += int(seg.max()) + 1 if len(seg) else 0
+    # A dense component that formed no face at all (too small or too curved for its cells)
+    # stays whole rather than vanish.
+    none = dense & (np.bincount(comp, weights=out >= 0, minlength=len(dense)) == 0)
+    if none.any():
+        lost = free & none[comp]
+        _, inv = np.unique(comp[lost], return_inverse=True)
+        out[lost] = base + inv.reshape(-1)
+    return out
+
+
+# The convex cell sizes a component may take (times objects.convex_cell): the first at least
+# _CELL_PER_SPACING times its points' spacing (its surfaces stay connected cell to cell, and
+# a gap a few spacings wide still cuts); sparser components are not segmented. Its normals'
+# window spans at least _WINDOW_SIGMAS noise sigmas (at most _MAX_WINDOW cells each side).
+# Spacing and noise are measured on up to _SPACING_SAMPLES points of each component.
+_CELL_STEPS = (1.0, 1.5, 2.25)
+_CELL_PER_SPACING = 2.5
+_WINDOW_SIGMAS = 8.0
+_MAX_WINDOW = 5
+_SPACING_SAMPLES = 200
+
+
+def _cell_level(
+    cp: np.ndarray,
+    comp: np.ndarray,
+    sigma: np.ndarray,
+    cell: float,
+    min_window: int,
+    min_points: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per component (C,): the index in _CELL_STEPS of its cell size (len(_CELL_STEPS) when
+    even the largest is finer than its points' spacing), and its normal window in cells
+    (at least ``min_window``). sigma: (M,) each point's noise (its surface's at its range; 0
+    when unknown), metres."""
+    n = int(comp.max()) + 1 if len(comp) else 0
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # A few evenly spread points of each component: their nearest other point's distance.
+    # Components too small to keep are left sparse (no samples, no tree for them).
+    order = np.argsort(comp, kind="stable")
+    bounds = np.searchsorted(comp[order], np.arange(n + 1))
+    size = np.diff(bounds)
+    big = size >= min_points
+    if not big.any():
+        return np.full(n, len(_CELL_STEPS), np.int64), np.full(n, min_window, np.int64)
+    take = np.where(big, np.minimum(size, _SPACING_SAMPLES), 0)
+    rank = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
+    pick = order[np.repeat(bounds[:-1], take) + rank * np.repeat(size // np.maximum(take, 1), take)]
+    # Nearest neighbours looked for within a cell of the largest size (farther is sparse),
+    # among the points of the components kept.
+    keep = np.flatnonzero(big[comp])
+    rank = np.full(len(cp), -1, np.int64)
+    rank[keep] = np.arange(len(keep))
+    dist = nearest_distances(cp[keep], rank[pick], cell * _CELL_STEPS[-1])
+    owner = comp[pick]
+    spacing = np.zeros(n)
+    noise = np.zeros(n)
+    for values, out in ((dist, spacing), (sigma[pick], noise)):
+        srt = np.lexsort((values, owner))
+        mid = np.searchsorted(owner[srt], np.arange(n)) + take // 2
+        out[:] = values[srt][np.minimum(mid, len(srt) - 1)]
+    need = _CELL_PER_SPACING * spacing / cell  # in convex cells
+    level = np.full(n, len(_CELL_STEPS), np.int64)
+    for k in reversed(range(len(_CELL_STEPS))):
+        level[big & (_CELL_STEPS[k] >= need)] = k
+    step = np.asarray(_CELL_STEPS + (_CELL_STEPS[-1],))[level]
+    window = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * cell * step)).astype(np.int64)
+    return level, np.clip(window, min_window, max(min_window, _MAX_WINDOW))
+
+
+def _band(
+    pts: np.ndarray, support: np.ndarray, surfaces: list[Surface], origin: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point's height above the surface under it (inf over none), that surface's band
+    half-width and noise sigma at the point's range, metres: three (M,)."""
+    by_id = {s.id: s for s in surfaces}
+    above = np.full(len(pts), np.inf)
+    band = np.zeros(len(pts))
+    sigma = np.zeros(len(pts))
+    r = (
+        np.ones(len(pts))
+        if origin is None
+        else np.linalg.norm(pts - np.asarray(origin, float), axis=1)
+    )
+    for sid in np.unique(support[support >= 0]):
+        at = np.flatnonzero(support == sid)
+        s = by_id[int(sid)]
+        above[at] = pts[at, 2] - s.height
+        band[at] = s.band_width(r[at]) if s.band[1] > 0 else _FALLBACK_BAND
+        sigma[at] = np.hypot(s.noise[0], s.noise[1] * r[at] ** 2)
+    return above, band, sigma

@@ -28,6 +28,7 @@ from supportnode.geometry.objects.clusters import (
 )
 from supportnode.geometry.objects.convexity import cluster_convex
 from supportnode.geometry.objects.describe import _describe, _stack
+from supportnode.geometry.objects.feet import claim_enclosed, claim_feet, claim_raised
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -106,7 +107,7 @@ def cluster_objects(
         lab = _cluster_knn(cp, params, stats)
     elif params.method == "voxel":
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
-        lab = _cluster_voxel(cp, params.voxel_size, stats, support)
+        lab = _cluster_voxel(cp, params.cluster_cell, stats, support)
     elif params.method == "convex":
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         lab = cluster_convex(cp, surfaces.surfaces, support, params, sensor_origin, stats)
@@ -115,6 +116,12 @@ def cluster_objects(
             f"unknown object method {params.method!r}; expected 'knn', 'voxel' or 'convex'"
         )
     lab = _drop_small(lab, params.min_points)
+    claimed = np.zeros(0, np.int64)
+    if params.foot_reach > 0 and any(s.band[0] > 0 for s in surfaces.surfaces) and len(lab):
+        if params.method == "knn":
+            support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
+        cand, cp, lab, claimed = _claim_feet(pts, surfaces, cand, cp, lab, support, params)
+        stats["foot_points"] = len(claimed)
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
     seg = _order(cp, lab, lookups[1], params)
     # Each component's surface by its label, for split_objects: a component that is not
@@ -127,7 +134,72 @@ def cluster_objects(
     seg.labels = _full_labels(len(pts), cand, seg.labels)
     stats["time_cluster_s"] = time.perf_counter() - t0
     seg.stats = {"components": n}
-    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats)
+    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed)
+
+
+# The inside of a bowl or a pot (its bottom in the table's band) is at most this large, m^2.
+_MAX_INSIDE = 0.1
+# ... and its points lie this much above the table on average (table seen between objects
+# does not), metres.
+_MIN_RAISE = 0.002
+# The band points searched for feet lie within this of the objects' x, y box, metres.
+_AROUND = 0.05
+
+
+def _claim_feet(
+    pts: np.ndarray,
+    surfaces: SurfaceResult,
+    cand: np.ndarray,
+    cp: np.ndarray,
+    lab: np.ndarray,
+    support: np.ndarray,
+    params: ObjectParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The objects' feet (see `feet.claim_feet`) added to the candidates: the surface points
+    under an object and the unclaimed candidates over a surface there. Returns the
+    candidates' rows, points and labels with the feet, and the surface rows taken."""
+    height = np.full(max(s.id for s in surfaces.surfaces) + 1, np.nan)
+    for s in surfaces.surfaces:
+        height[s.id] = s.height
+    # Only over surfaces whose noise band labelled them (a depth camera's): elsewhere the
+    # surface's own tolerance and k-NN normals already decided (see surfaces.band).
+    by_band = np.zeros(len(height), dtype=bool)
+    for s in surfaces.surfaces:
+        by_band[s.id] = s.band[0] > 0
+    is_raised = np.zeros(len(pts), dtype=bool)
+    is_raised[surfaces.raised] = True
+    on = np.flatnonzero(surfaces.labels >= 0)
+    on = on[by_band[surfaces.labels[on]]]
+    # Only the band around the objects matters (and the raised patches, wherever they lie).
+    obj = cp[lab >= 0]
+    if len(obj):
+        lo, hi = obj[:, :2].min(axis=0) - _AROUND, obj[:, :2].max(axis=0) + _AROUND
+        x, y = pts[on, 0], pts[on, 1]
+        near = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+        on = on[near | is_raised[on]]
+    loose = np.flatnonzero((lab < 0) & (support >= 0))
+    loose = loose[by_band[support[loose]]]
+    band_xyz = np.concatenate([pts[on], cp[loose]])
+    band_surf = np.concatenate([surfaces.labels[on].astype(np.int64), support[loose]])
+    cell = params.convex_cell
+    owner = claim_feet(
+        band_xyz, band_surf, height, cp, lab, support, height, cell, params.foot_reach
+    )
+    owner = claim_enclosed(
+        band_xyz, band_surf, height, owner, cp, lab, cell, _MAX_INSIDE, _MIN_RAISE
+    )
+    raised = np.r_[is_raised[on], is_raised[cand[loose]]]
+    owner = claim_raised(
+        band_xyz, owner, raised, cp, lab, 2 * cell, 3 * params.foot_reach, params.min_points
+    )
+    took = owner[: len(on)] >= 0
+    lab = lab.copy()
+    lab[loose] = np.where(owner[len(on) :] >= 0, owner[len(on) :], lab[loose])
+    rows = on[took]
+    cand = np.concatenate([cand, rows])
+    cp = np.concatenate([cp, pts[rows]])
+    lab = np.concatenate([lab, owner[: len(on)][took]])
+    return cand, cp, lab, rows
 
 
 def split_objects(

@@ -104,3 +104,5 @@ class Components:
     _lookups: tuple[list[_SupportLookup], list[_SupportLookup]] = field(repr=False)
     _n_points: int = 0
     _stats: dict = field(default_factory=dict, repr=False)
+    # Rows the objects took from the surfaces' noise band (their feet): no longer surface.
+    claimed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)

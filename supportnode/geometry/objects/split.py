@@ -35,7 +35,7 @@ def _split_touching(
     """Cut clusters whose x, y footprint has large parts joined by a neck (see _split_footprint),
     or else whose top steps between two flat levels side by side (see _split_step). memo: the
     cuts of clusters seen with the same points in the previous detection."""
-    cell = params.voxel_size / _SPLIT_CELL_DIVISOR
+    cell = params.cluster_cell / _SPLIT_CELL_DIVISOR
     radius = params.split_neck_width / 2.0
     n = int(lab.max()) + 1
     out = lab.copy()
@@ -99,12 +99,12 @@ def _split_one(
     if n_parts >= 2 or extent > _STEP_MAX_EXTENT:
         return parts, n_parts, None
     p_c = np.take(cp, idx, axis=0)
-    step, dense = _split_step(p_c, params.voxel_size, params.min_points)
+    step, dense = _split_step(p_c, params.cluster_cell, params.min_points)
     if step is not None:
         return step, 2, "step_splits"
     if dense and params.split_concave and extent <= _CONCAVE_MAX_EXTENT:
         # Not tried on sparse footprints (far scans) or wide structure.
-        conc = _split_concave(p_c, params.voxel_size, params.concave_tolerance, params.min_points)
+        conc = _split_concave(p_c, params.cluster_cell, params.concave_tolerance, params.min_points)
         if conc is not None:
             return conc, int(conc.max()) + 1, "concave_splits"
     return parts, n_parts, None

@@ -34,7 +34,7 @@ def _absorb_clutter(
         return np.zeros(0, dtype=np.int64)
     offsets = layered_offsets(8)
     offsets = np.concatenate([offsets, -offsets])
-    min_spread = 0.25 * np.asarray(params.voxel_size[:2])
+    min_spread = 0.25 * np.asarray(params.plane_voxel[:2])
     frontier = np.flatnonzero(surface_of_voxel >= 0)
     added = []
     for _ in range(steps):  # a few rings of voxels, each step vectorised

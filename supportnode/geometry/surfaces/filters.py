@@ -252,9 +252,10 @@ def _object_tops(
     sid = lut[labels[pos]]
     for i, under in below.items():
         s = surfaces[i]
-        inner, (origin, cell) = _inner_footprint(xy[sid == s.id], s.area)
-        if inner is None:
+        found, (origin, cell) = _inner_footprint(xy[sid == s.id], s.area)
+        if found is None:
             continue  # too small to tell what lies under it: keep
+        inner = found
         for j in under:
             t = surfaces[j]
             f = np.floor((xy[sid == t.id] - origin) / cell).astype(np.int64)
@@ -264,7 +265,7 @@ def _object_tops(
             if seen <= _TOP_MAX_SEEN * expected:
                 out[i] = True
                 break
-    for i in np.flatnonzero(out):  # a few object tops: do they carry something?
+    for i in np.flatnonzero(out).tolist():  # a few object tops: do they carry something?
         out[i] = (
             _load(grid, labels, lut, keys[i], voxel_cell, surfaces[i].height, params)
             < _TOP_MIN_LOAD

@@ -3,6 +3,7 @@ voxels whose planes continue into each other, size limits, and point labels."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -198,7 +199,7 @@ def _filter_components(
         return 0
     comp = surface_of_voxel[sv]
     keys = grid.keys[sv]
-    vx, vy = params.voxel_size[0], params.voxel_size[1]
+    vx, vy = params.plane_voxel[0], params.plane_voxel[1]
     # Footprint cells per component (a column holding two layers of one surface counts once).
     cell_lin, cell_comp = _unique_cells(keys[:, :2], comp)
     n_cells = np.bincount(cell_comp, minlength=int(comp.max()) + 1)
@@ -239,27 +240,27 @@ def _label_points_planar(
     surface_of_voxel: np.ndarray,
     planes: _Planes,
     tol_by_comp: np.ndarray,
-) -> np.ndarray:
-    """Surface label of each point, in the grid's voxel order (``grid.order``).
+    band: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Surface label of each point, in the grid's voxel order (``grid.order``), and its
+    distance to the plane that labelled it (read only where labelled), metres.
 
     A point is on a surface when it lies within tolerance of the plane of a surface voxel
     in its own column: its own voxel, or the one just below or above (a noisy or
     layer-straddling surface spills into neighbouring layers). index:
-    ``KeyIndex.build(grid.keys)``."""
-    # Imported here: importing the geometry (as the wire's types do) must not load numba.
-    from supportnode.kernels.planes import label_by_planes
-
+    ``KeyIndex.build(grid.keys)``. band: the tolerance (K,) of surfaces (K,) for the points
+    of voxels (K,) (the sensor's noise at their range), instead of ``tol_by_comp``."""
     n = len(grid.order)
     # int32 and no (N,) float fill: fresh pages cost more here than the arithmetic on them.
     sorted_labels = np.full(n, -1, dtype=np.int32)
+    best = np.empty(n)  # distance of each labelled point to its plane; read where labelled
     sv = np.flatnonzero(surface_of_voxel >= 0)
     if len(sv) == 0:
-        return sorted_labels
+        return sorted_labels, best
     # The voxels just above and below the surface voxels: those whose neighbour below or
     # above is one (ascending, as keys + 1 in z keep the voxels' order).
     up, down = index.neighbours_many(sv, [(0, 0, 1), (0, 0, -1)], grid.keys)
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
-    best = np.empty(n)  # distance of each labelled point to its plane; read where labelled
     for dz in (0, -1, 1):  # three column neighbours, each one compiled loop over the points
         if dz == 0:
             vsel = sv
@@ -270,24 +271,55 @@ def _label_points_planar(
             vsel, t = hit[on], sv[on]
             if len(vsel) == 0:
                 continue
-        # The plane of surface voxel t as z = A + bx*lx + by*ly in voxel vsel's local frame.
-        nrm = planes.normal[t]
-        bx, by = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
-        corner = grid.keys[vsel] * grid.size
-        m = planes.mean[t]
-        a = (m[:, 2] - corner[:, 2]) + bx * (corner[:, 0] - m[:, 0]) + by * (corner[:, 1] - m[:, 1])
-        # Per voxel: the tolerance of each voxel's surface; a labelled point changes surface
-        # only for a nearer plane.
         surf_v = surface_of_voxel[t]
-        label_by_planes(
-            grid.local,
-            grid.starts[vsel],
-            grid.counts[vsel],
-            (a, bx, by),
-            surf_v,
-            tol_by_comp[surf_v],
-            sorted_labels,
-            best,
-            nearer=dz != 0,
-        )
-    return sorted_labels
+        tol = tol_by_comp[surf_v]
+        if band is not None:
+            tol = band(surf_v, vsel)
+        # A labelled point changes surface only for a nearer plane.
+        _label_by_plane_of(grid, planes, t, vsel, surf_v, tol, sorted_labels, best, dz != 0)
+    return sorted_labels, best
+
+
+def _plane_in(
+    grid: VoxelGrid, mean: np.ndarray, normal: np.ndarray, vsel: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Planes through ``mean`` (K, 3) with ``normal`` (K, 3) (z > 0) as z = a + bx lx + by ly
+    in the local frames (corner-relative) of the grid's voxels ``vsel`` (K,): (a, bx, by)."""
+    bx, by = -normal[:, 0] / normal[:, 2], -normal[:, 1] / normal[:, 2]
+    corner = grid.keys[vsel] * grid.size
+    a = (
+        (mean[:, 2] - corner[:, 2])
+        + bx * (corner[:, 0] - mean[:, 0])
+        + by * (corner[:, 1] - mean[:, 1])
+    )
+    return a, bx, by
+
+
+def _label_by_plane_of(
+    grid: VoxelGrid,
+    planes: _Planes,
+    t: np.ndarray,
+    vsel: np.ndarray,
+    label: np.ndarray,
+    tol: np.ndarray,
+    sorted_labels: np.ndarray,
+    best: np.ndarray,
+    nearer: bool,
+) -> None:
+    """Label, in place, the points of voxels ``vsel`` (K,) within ``tol`` (K,) of the planes
+    of voxels ``t`` (K,) with ``label`` (K,) (see ``kernels.planes.label_by_planes``)."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.planes import label_by_planes
+
+    a, bx, by = _plane_in(grid, planes.mean[t], planes.normal[t], vsel)
+    label_by_planes(
+        grid.local,
+        grid.starts[vsel],
+        grid.counts[vsel],
+        (a, bx, by),
+        label,
+        tol,
+        sorted_labels,
+        best,
+        nearer=nearer,
+    )

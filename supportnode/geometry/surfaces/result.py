@@ -33,6 +33,15 @@ class Surface:
     cell_size: tuple[float, float]  # (vx, vy) of the footprint grid; cell (i, j) spans
     # x in [i*vx, (i+1)*vx), y in [j*vy, (j+1)*vy)
     width: float = 0.0  # largest inscribed square-ish width of the footprint, m
+    # Measured noise: sigma(r) = sqrt(a^2 + (b r^2)^2) m at range r m from the sensor, (a, b);
+    # and the band that labelled its points: (sigmas, minimum m). Zeros: not measured.
+    noise: tuple[float, float] = (0.0, 0.0)
+    band: tuple[float, float] = (0.0, 0.0)
+
+    def band_width(self, r: np.ndarray | float) -> np.ndarray:
+        """The half-width of the surface's noise band at range ``r`` m, metres."""
+        r2 = np.asarray(r, dtype=np.float64) ** 2
+        return np.maximum(self.band[0] * np.hypot(self.noise[0], self.noise[1] * r2), self.band[1])
 
     def to_dict(self) -> dict:
         """JSON-ready dictionary (no numpy types). Floats are rounded to 1e-7 (0.1 um, 1e-7 of
@@ -50,6 +59,7 @@ class Surface:
             "outline": [np.round(p, 6).tolist() for p in self.outline],
             "point_count": int(self.point_count),
             "voxel_count": int(self.voxel_count),
+            "noise": {"sigma": _r(self.noise[0]), "sigma_per_m2": _r(self.noise[1])},
         }
 
 
@@ -60,3 +70,6 @@ class SurfaceResult:
     surfaces: list[Surface]
     labels: np.ndarray  # (N,) int32: surface id of each input point, -1 when on none
     stats: dict = field(default_factory=dict)  # counts for diagnostics (voxels, candidates, ...)
+    # Rows (ascending) of raised patches in a surface's noise band (a pot's inner bottom a few
+    # millimetres above the table): labelled none, and not the surface's noise either.
+    raised: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))

@@ -86,23 +86,87 @@ def test_supported_by_boxes():
     assert supported_by(lo2, hi2, base)[1] == -1
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "name, parts",
-    [("box_on_box", 2), ("can_against_box", 2), ("boxes_3cm_apart", 2), ("boxes_at_1.5m", 3)],
-)
-def test_kinect_tabletops_convex(name, parts):
-    """Simulated Kinect views with NaN holes, camera frame, --align: separate objects."""
-    c = case(name, seed=0, frame="optical")
+# case -> the least share of each object in its cluster, and of that cluster in the object.
+TABLETOPS = {
+    "touching_boxes": 0.85,  # face to face, in contact
+    "boxes_1mm_apart": 0.85,
+    "boxes_1cm_apart": 0.9,
+    "boxes_3cm_apart": 0.9,
+    "box_on_box": 0.9,  # two objects, the upper one supported by the lower
+    "can_against_box": 0.9,
+    "mug": 0.9,  # with its handle: one object
+    "bowl": 0.8,  # its inside curves gently: one object
+    "two_cans_1cm_apart": 0.9,
+    "flat_book": 0.9,  # 3.5 cm tall: an object, not part of the table
+    "boxes_at_0.5m": 0.9,
+    "boxes_at_1.5m": 0.85,  # noise and depth steps grow with the square of the range
+}
+
+
+def _detect_case(name: str, seed: int = 0):
+    """A simulated Kinect view (camera frame, NaN holes dropped) as `detect --align` takes it."""
+    c = case(name, seed=seed, frame="optical")
     ok = np.isfinite(c.cloud.points[:, 0])
-    pts, gt = c.cloud.points[ok].astype(float), c.cloud.object[ok]
-    params = load_config(None, ["objects.method=convex"])
-    d = detect(pts, params, align=True, sensor_origin=np.zeros(3), origin_assumed=True)
-    m = gt >= 0
-    big = [cl for cl in d.objects.clusters if cl.point_count > 200]
-    assert len(big) >= parts - (name == "box_on_box")
-    if name != "box_on_box":
-        assert adjusted_rand_index(gt[m], d.objects.labels[m]) > 0.7
+    pts = c.cloud.points[ok].astype(float)
+    d = detect(
+        pts, load_config(None, []), align=True, sensor_origin=np.zeros(3), origin_assumed=True
+    )
+    return c, ok, d
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(TABLETOPS))
+def test_kinect_tabletops_each_object_is_one_cluster(name):
+    """The default method on depth-camera views: touching, stacked and nearly touching objects
+    come apart; a mug with its handle and a bowl stay whole; a flat book is an object."""
+    c, ok, d = _detect_case(name)
+    truth, lab = c.cloud.object[ok], d.objects.labels
+    least = TABLETOPS[name]
+    for g in np.unique(truth[truth >= 0]):
+        mine = truth == g
+        best = np.bincount(lab[mine & (lab >= 0)]).argmax()
+        share = (lab[mine] == best).mean()
+        purity = (mine & (lab == best)).sum() / (lab == best).sum()
+        who = c.scene.object_names[g]
+        assert share >= least and purity >= least, f"{name}: {who} {share:.2f}/{purity:.2f}"
+        assert (d.surfaces.labels[mine] >= 0).mean() < 0.1, f"{name}: {who} lost into a surface"
+
+
+@pytest.mark.slow
+def test_box_on_box_is_supported_by_the_lower_box():
+    c, ok, d = _detect_case("box_on_box")
+    truth, lab = c.cloud.object[ok], d.objects.labels
+    names = list(c.scene.object_names)
+    of = {n: np.bincount(lab[(truth == names.index(n)) & (lab >= 0)]).argmax() for n in names}
+    by = {cl.id: cl.supported_by for cl in d.objects.clusters}
+    assert by[of["upper"]] == of["lower"]
+    assert by[of["lower"]] == -1
+    upper = next(cl for cl in d.objects.clusters if cl.id == of["upper"])
+    lower = next(cl for cl in d.objects.clusters if cl.id == of["lower"])
+    assert upper.surface_id == lower.surface_id is not None  # the surface under the stack
+
+
+@pytest.mark.slow
+def test_an_organised_cloud_with_nan_holes_reads_and_detects(tmp_path):
+    """An organised PCD with NaN pixels, read as a user's file: the same objects as the
+    points given directly."""
+    from supportnode.io.clouds import read_cloud
+
+    c = case("can_against_box", seed=1, frame="optical")
+    xyz = c.cloud.points.astype("<f4")
+    assert np.isnan(xyz).any() and len(xyz) == 640 * 480
+    header = (
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 640\n"
+        "HEIGHT 480\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 307200\nDATA binary\n"
+    )
+    path = tmp_path / "view.pcd"
+    path.write_bytes(header.encode() + xyz.tobytes())
+    cloud = read_cloud(path)
+    assert cloud.width == 640 and cloud.dropped_nonfinite > 0
+    params = load_config(None, [])
+    d = detect(cloud.points, params, align=True, sensor_origin=np.zeros(3), origin_assumed=True)
+    big = [cl for cl in d.objects.clusters if cl.point_count > 1000]
+    assert len(big) == 2
 
 
 MOSD = Path(__file__).resolve().parents[3].parent / "shared" / "real_scans" / "mosd_learn"
@@ -124,14 +188,18 @@ def test_real_mosd_floor():
     spec.loader.exec_module(mod)
     from supportnode.io.clouds import read_cloud
 
-    params = load_config(None, ["objects.method=convex"])
+    params = load_config(None, [])
     scores = []
-    for k in (0, 13, 27, 36):
+    for k in (0, 13, 20, 24, 27, 36, 41):  # boxes, stacked, occluded, cylinders
         cloud = read_cloud(MOSD / f"learn{k}.pcd")
         scores.append(mod.run_ours(cloud.points, cloud.fields["label"].astype(np.int64), params))
+    # Floors well below what bench/real_accuracy.py measures (docs/accuracy.md), so that a
+    # regression shows and noise does not.
     assert not any(s.refused for s in scores)
-    assert np.mean([s.ari for s in scores]) > 0.75
-    assert min(s.table_p for s in scores) > 0.97
+    assert np.mean([s.ari for s in scores]) > 0.8
+    assert sum(s.recovered for s in scores) >= 0.75 * sum(s.parts for s in scores)
+    assert min(s.table_p for s in scores) > 0.98
+    assert min(s.table_r for s in scores) > 0.96
 
 
 def _cluster(cid, surface_id, by=-1):

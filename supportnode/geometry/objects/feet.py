@@ -1,0 +1,169 @@
+"""An object's foot: the points in its surface's noise band right under the object.
+
+The bottom few millimetres of an object standing on a table lie within the table's noise
+band, so surface detection labels them table. They are the object's where the object itself
+comes down to the table over them: a band point whose column (a fine cell in x, y) holds the
+object's points no higher than ``reach`` above the surface goes to that object. Table seen
+beside or in front of an object lies in other columns; table under an overhang (a lying
+can, a chair seat) lies below object points that are higher than ``reach``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# The largest raster (cells) of an object's feet or of the objects' joint footprint.
+_MAX_RASTER = 4_000_000
+# The joint footprint is closed by this many cells before its holes are filled.
+_CLOSE_CELLS = 4
+
+
+def claim_feet(
+    xyz: np.ndarray,
+    surface: np.ndarray,
+    height: np.ndarray,
+    obj_xyz: np.ndarray,
+    obj_label: np.ndarray,
+    obj_surface: np.ndarray,
+    obj_height: np.ndarray,
+    cell: float,
+    reach: float,
+) -> np.ndarray:
+    """(K,) int64 the object claiming each of K band points, -1 for none.
+
+    xyz: (K, 3) band points, metres, z up; surface: (K,) the surface whose band holds each;
+    height: (K,) surface heights by surface id (S,) (indexed by ``surface``). obj_xyz (M, 3),
+    obj_label (M,) object of each point (-1: none), obj_surface (M,) the surface under each
+    (-1: none), obj_height (S,) as ``height``. A band point goes to the object whose lowest
+    point in its ``cell`` column, over the same surface, is at most ``reach`` above it."""
+    out = np.full(len(xyz), -1, np.int64)
+    low = (obj_label >= 0) & (obj_surface >= 0)
+    if not low.any() or len(xyz) == 0:
+        return out
+    idx = np.flatnonzero(low)
+    idx = idx[obj_xyz[idx, 2] - obj_height[obj_surface[idx]] <= reach]
+    for sid in np.unique(obj_surface[idx]):
+        mine = idx[obj_surface[idx] == sid]
+        lo = obj_xyz[mine, :2].min(axis=0)
+        ij = np.floor((obj_xyz[mine, :2] - lo) / cell).astype(np.int64)
+        shape = ij.max(axis=0) + 1
+        if shape[0] * shape[1] > _MAX_RASTER:
+            continue  # room structure's feet: left to the surface
+        # The lowest object point of each column decides its owner: written last.
+        order = np.argsort(-obj_xyz[mine, 2], kind="stable")
+        owner = np.full(shape, -1, np.int64)
+        owner[ij[order, 0], ij[order, 1]] = obj_label[mine[order]]
+        hi = lo + shape * cell
+        q = np.flatnonzero(
+            (surface == sid)
+            & (xyz[:, 0] >= lo[0])
+            & (xyz[:, 1] >= lo[1])
+            & (xyz[:, 0] < hi[0])
+            & (xyz[:, 1] < hi[1])
+        )
+        qij = np.minimum(np.floor((xyz[q, :2] - lo) / cell).astype(np.int64), shape - 1)
+        out[q] = owner[qij[:, 0], qij[:, 1]]
+    return out
+
+
+def claim_enclosed(
+    xyz: np.ndarray,
+    surface: np.ndarray,
+    height: np.ndarray,
+    owner: np.ndarray,
+    obj_xyz: np.ndarray,
+    obj_label: np.ndarray,
+    cell: float,
+    max_area: float,
+    min_raise: float,
+) -> np.ndarray:
+    """``owner`` (K,) with the band points enclosed by objects added: a bowl's or a pot's
+    inner bottom lies in the table's band, ringed in x, y by its walls and rim (which may be
+    segments of their own). The joint footprint of the objects (the columns of their points,
+    closed by one cell) has its holes filled; the band points of a hole of at most
+    ``max_area`` m^2 that lie on average ``min_raise`` or more above their surface (a pot's
+    bottom is a few millimetres thick; table seen between objects is not raised) go to the
+    object holding most of the hole's rim. Arguments as for :func:`claim_feet`."""
+    from scipy import ndimage
+
+    out = owner.copy()
+    free = np.flatnonzero(out < 0)
+    idx = np.flatnonzero(obj_label >= 0)
+    if len(idx) == 0 or len(free) == 0:
+        return out
+    lo = obj_xyz[idx, :2].min(axis=0) - 2 * cell
+    shape = np.floor((obj_xyz[idx, :2].max(axis=0) - lo) / cell).astype(np.int64) + 3
+    if shape[0] * shape[1] > _MAX_RASTER:
+        return out
+    ij = np.floor((obj_xyz[idx, :2] - lo) / cell).astype(np.int64)
+    who = np.full(shape, -1, np.int64)  # an object of each occupied column (the last)
+    who[ij[:, 0], ij[:, 1]] = obj_label[idx]
+    # Closed across a few cells: a wall seen edge-on, at the sides of a bowl, leaves gaps.
+    img = ndimage.binary_closing(who >= 0, iterations=_CLOSE_CELLS, border_value=0)
+    holes, n_holes = ndimage.label(ndimage.binary_fill_holes(img) & ~img)
+    if n_holes == 0:
+        return out
+    qij = np.floor((xyz[free, :2] - lo) / cell).astype(np.int64)
+    inside = np.all((qij >= 0) & (qij < shape), axis=1)
+    q, qij = free[inside], qij[inside]
+    hole_of = holes[qij[:, 0], qij[:, 1]]
+    q, hole_of = q[hole_of > 0], hole_of[hole_of > 0]
+    area = np.bincount(holes.ravel(), minlength=n_holes + 1) * cell * cell
+    for h in np.unique(hole_of):
+        mine = q[hole_of == h]
+        raised = np.mean(xyz[mine, 2] - height[surface[mine]])
+        if area[h] > max_area or raised < min_raise:
+            continue
+        ring = ndimage.binary_dilation(holes == h) & (who >= 0)
+        out[mine] = np.bincount(who[ring]).argmax()
+    return out
+
+
+def claim_raised(
+    xyz: np.ndarray,
+    owner: np.ndarray,
+    raised: np.ndarray,
+    obj_xyz: np.ndarray,
+    obj_label: np.ndarray,
+    cell: float,
+    reach: float,
+    min_points: int,
+) -> np.ndarray:
+    """``owner`` (K,) with the raised patches of the band given out: a patch (``raised``:
+    (K,) bool, points a surface found raised above its band, joined by ``cell`` columns)
+    goes whole to the object coming down within ``reach`` above it over most of its rim (a
+    pot's inner bottom, to the pot); a patch touching no object is an object of its own (a
+    sheet, a coaster) when it has ``min_points``, else stays none. New objects take labels
+    above ``obj_label``'s."""
+    from scipy import ndimage
+
+    out = owner.copy()
+    q = np.flatnonzero(raised & (out < 0))
+    if len(q) == 0:
+        return out
+    lo = xyz[q, :2].min(axis=0) - 3 * cell
+    shape = np.floor((xyz[q, :2].max(axis=0) - lo) / cell).astype(np.int64) + 4
+    if shape[0] * shape[1] > _MAX_RASTER:
+        return out
+    qij = np.floor((xyz[q, :2] - lo) / cell).astype(np.int64)
+    patch_img = np.zeros(shape, dtype=bool)
+    patch_img[qij[:, 0], qij[:, 1]] = True
+    patches, n = ndimage.label(patch_img, structure=np.ones((3, 3)))
+    # The objects' columns near the patches, their points no higher than reach above them.
+    top = xyz[q, 2].max() + reach
+    near = np.flatnonzero(obj_label >= 0)
+    oij = np.floor((obj_xyz[near, :2] - lo) / cell).astype(np.int64)
+    ok = np.all((oij >= 0) & (oij < shape), axis=1) & (obj_xyz[near, 2] <= top)
+    who = np.full(shape, -1, np.int64)
+    who[oij[ok, 0], oij[ok, 1]] = obj_label[near[ok]]
+    next_label = int(obj_label.max()) + 1 if len(obj_label) else 0
+    of_point = patches[qij[:, 0], qij[:, 1]]
+    for p in range(1, n + 1):
+        mine = q[of_point == p]
+        rim = ndimage.binary_dilation(patches == p, iterations=2) & (who >= 0)
+        if rim.any():
+            out[mine] = np.bincount(who[rim]).argmax()
+        elif len(mine) >= min_points:
+            out[mine] = next_label
+            next_label += 1
+    return out

@@ -1,0 +1,438 @@
+"""The noise band of a surface: which points lie on it, judged by the sensor's noise.
+
+A fixed tolerance is wrong both ways on a depth camera: 1 cm keeps the bottom centimetre of
+every object on the table (2-5 % of an object's points) and a bowl's inner bottom, while far
+from the camera the table's own noise outgrows it. Each surface measures its noise instead:
+the spread of its points about their voxels' planes, by range from the sensor, fitted as
+``sigma(r)^2 = a^2 + (b r^2)^2`` (a depth camera's error grows with the square of the range;
+``b = 0`` without a sensor). A point is on the surface within ``k sigma(r)`` of its plane,
+never closer than ``band_min`` nor farther than the growth's tolerance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.surfaces.planar import (
+    _label_by_plane_of,
+    _label_points_planar,
+    _plane_in,
+    _Planes,
+)
+from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
+from supportnode.kernels.components import label_edges
+from supportnode.params import SurfaceParams
+
+# Range bins for the fit, metres wide; a bin needs this many points to count.
+_BIN = 0.2
+_BIN_MIN_POINTS = 50
+# A patch of a surface's band whose columns average this many sigma above the plane, over
+# at least this area (m^2), is no part of it (see drop_raised).
+_RAISED_SIGMAS = 1.5
+_RAISED_MIN_AREA = 0.004
+# The noise is fitted to an even sample of at most this many of the labelled points.
+_FIT_SAMPLES = 6_000
+# Robust sigma from the median absolute residual of a normal distribution.
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Per surface: sigma(r) = sqrt(a^2 + (b r^2)^2), metres (a: (S,) m, b: (S,) 1/m)."""
+
+    a: np.ndarray
+    b: np.ndarray
+
+    def sigma(self, surface: np.ndarray, r: np.ndarray | float) -> np.ndarray:
+        """(K,) noise of ``surface`` (K,) ids at range ``r`` (K,) or scalar, metres."""
+        r2 = np.asarray(r, dtype=np.float64) ** 2
+        return np.hypot(self.a[surface], self.b[surface] * r2)
+
+
+def fit_noise(
+    surface: np.ndarray, residual: np.ndarray, r: np.ndarray | None, n_surfaces: int
+) -> NoiseModel:
+    """The noise model of each surface from its labelled points.
+
+    surface: (P,) int surface id of each labelled point; residual: (P,) float64 its distance
+    to its voxel's plane, metres; r: (P,) its range from the sensor, metres, or None when the
+    sensor is unknown (sigma then does not vary with range). Per range bin the robust sigma
+    (1.4826 x the median residual) is taken, then ``a^2 + b^2 r^4`` fitted to the bins'
+    variances by least squares weighted by their points, with a, b >= 0."""
+    a = np.zeros(n_surfaces)
+    b = np.zeros(n_surfaces)
+    if len(surface) == 0:
+        return NoiseModel(a, b)
+    rb = np.zeros(len(surface), np.int64) if r is None else np.floor(r / _BIN).astype(np.int64)
+    nb = int(rb.max()) + 1
+    key = surface.astype(np.int64) * nb + rb
+    order = np.lexsort((residual, key))
+    key, res = key[order], residual[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    counts = np.diff(np.r_[starts, len(key)])
+    med = res[starts + counts // 2]
+    sid, bin_ = key[starts] // nb, key[starts] % nb
+    var = (_MAD_TO_SIGMA * med) ** 2
+    r4 = ((bin_ + 0.5) * _BIN) ** 4
+    for s in np.unique(sid):
+        m = sid == s
+        ok = m & (counts >= _BIN_MIN_POINTS)
+        if not ok.any():
+            ok = m & (counts == counts[m].max())
+        a[s], b[s] = _fit_bins(var[ok], r4[ok], counts[ok].astype(np.float64), r is not None)
+    return NoiseModel(a, b)
+
+
+def _fit_bins(var: np.ndarray, r4: np.ndarray, w: np.ndarray, ranged: bool) -> tuple[float, float]:
+    """(a, b) >= 0 of var = a^2 + b^2 r4, weighted least squares over the bins."""
+    if not ranged or len(var) < 2 or np.ptp(r4) <= 0:
+        return float(np.sqrt(np.average(var, weights=w))), 0.0
+    design = np.stack([np.ones_like(r4), r4], axis=1) * np.sqrt(w)[:, None]
+    (a2, b2), *_ = np.linalg.lstsq(design, var * np.sqrt(w), rcond=None)
+    if b2 < 0:
+        return float(np.sqrt(np.average(var, weights=w))), 0.0
+    if a2 < 0:
+        return 0.0, float(np.sqrt(np.sum(w * var * r4) / np.sum(w * r4 * r4)))
+    return float(np.sqrt(a2)), float(np.sqrt(b2))
+
+
+@dataclass(frozen=True)
+class Band:
+    """Each surface's band: ``width(surface, voxel)`` (K,) metres for surface components
+    (K,) and the grid's voxels (K,) holding the points: ``sigmas`` noise sigmas at the
+    voxels' range, at least ``floor``, for the components the band decides (``by_band``,
+    (C,)), at most the larger of ``tolerance`` and ``ceiling``; the growth's ``tolerance``
+    (C,) for the others."""
+
+    model: NoiseModel
+    sigmas: float
+    floor: float
+    r_voxel: np.ndarray | None  # (M,) range of each voxel's centre from the sensor, m
+    by_band: np.ndarray
+    tolerance: np.ndarray
+    ceiling: float = np.inf  # the band's widest, metres (half a voxel's height)
+
+    def width(self, surface: np.ndarray, voxel: np.ndarray) -> np.ndarray:
+        r = 0.0 if self.r_voxel is None else self.r_voxel[voxel]
+        w = np.maximum(self.sigmas * self.model.sigma(surface, r), self.floor)
+        return np.where(
+            self.by_band[surface], np.minimum(w, self.tolerance[surface]), self.tolerance[surface]
+        )
+
+
+def label_in_band(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    tolerance: np.ndarray,
+    sensor_origin: np.ndarray | None,
+    params: SurfaceParams,
+) -> tuple[np.ndarray, np.ndarray, Band | None]:
+    """Surface labels in the grid's voxel order (as ``_label_points_planar``), the points'
+    heights above their planes, metres, and the surfaces' band (by surface component; None
+    when ``params.band_sigmas`` is 0: ``tolerance`` alone).
+
+    The points within the growth's ``tolerance`` (per component) measure each surface's
+    noise. Where the band decides (:func:`band_decides`: a depth camera's surfaces), the
+    noise is measured again about planes refitted over each voxel's neighbours (which the
+    voxels holding clutter keep), and the labels redone within ``params.band_sigmas`` sigma
+    at the range of each point's voxel, at least ``params.band_min``, at most the larger of
+    ``tolerance`` and half a voxel's height; elsewhere ``tolerance`` stays. ``planes`` may
+    change."""
+    labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
+    if params.band_sigmas <= 0 or not (labels >= 0).any():
+        return labels, best, None
+    r_voxel = None
+    if sensor_origin is not None:
+        centre = (grid.keys + 0.5) * grid.size
+        r_voxel = np.linalg.norm(centre - np.asarray(sensor_origin, np.float64), axis=1)
+    model = _fit(grid, labels, best, r_voxel, len(tolerance))
+    none = np.zeros(len(tolerance), dtype=bool)
+    band = Band(model, params.band_sigmas, params.band_min, r_voxel, none, tolerance)
+    by_band = band_decides(grid, labels, surface_of_voxel, band, params.clutter_normal_k)
+    if not by_band.any():
+        return labels, best, band
+    # The noise is measured about the windows' planes (a surface straddling two layers of
+    # voxels fits each half its own plane, and its noise looks halved); those planes replace
+    # the voxels' own where clutter stands in the column (a foot tilts the plane) or the
+    # voxel's own plane leaves its window's by more than the noise (a pot's inner bottom
+    # lifts it): elsewhere a voxel's own plane follows the surface, and a far depth camera's
+    # steps, best.
+    window = _Planes(planes.mean.copy(), planes.normal.copy(), planes.roughness)
+    refit_planes(grid, index, surface_of_voxel, window, labels, by_band)
+    trial, best = _label_points_planar(grid, index, surface_of_voxel, window, tolerance)
+    model = _fit(grid, trial, best, r_voxel, len(tolerance))
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    sv = sv[by_band[surface_of_voxel[sv]]]
+    r = 0.0 if r_voxel is None else r_voxel[sv]
+    off = _miss(grid, planes, window, sv) > _OFF_SIGMAS * model.sigma(surface_of_voxel[sv], r)
+    take = np.union1d(_cluttered(grid, index, surface_of_voxel, labels), sv[off])
+    planes.mean[take] = window.mean[take]
+    planes.normal[take] = window.normal[take]
+    band = Band(
+        model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance, 0.5 * grid.size[2]
+    )
+    labels, best = _label_points_planar(
+        grid, index, surface_of_voxel, planes, tolerance, band.width
+    )
+    return labels, best, band
+
+
+def _fit(
+    grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, r_voxel: np.ndarray | None, n: int
+) -> NoiseModel:
+    """:func:`fit_noise` of the labelled points (``best``: their heights above the planes)."""
+    on = np.flatnonzero(labels >= 0)
+    # Medians need no more than an even sample (a scan's table holds ~10^5 points).
+    on = on[:: max(1, len(on) // _FIT_SAMPLES)]
+    voxel = np.searchsorted(grid.starts, on, side="right") - 1
+    r = None if r_voxel is None else r_voxel[voxel]
+    return fit_noise(labels[on].astype(np.int64), np.abs(best[on]), r, n)
+
+
+# The voxels beside a surface voxel (and a layer up or down) that the ring pass labels.
+_RING = [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1) if x or y]
+
+
+def label_ring(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    kept: np.ndarray,
+    planes: _Planes,
+    labels: np.ndarray,
+    best: np.ndarray,
+    band: Band,
+) -> np.ndarray:
+    """Label, in place, points of the voxels around the kept surfaces' voxels that are no
+    kept surface's voxel themselves, within the band of the neighbouring surface voxel's plane (the
+    nearest plane wins): a surface's cluttered columns that growth left out (a can's foot
+    beside the table leaves the table around it unlabelled otherwise). kept: (C,) bool per
+    surface component. Returns (C,) the points added per component."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    sv = sv[kept[surface_of_voxel[sv]]]
+    before = labels.copy()
+    for hit in index.neighbours_many(sv, _RING, grid.keys):
+        on = hit >= 0
+        other = surface_of_voxel[hit[on]]
+        on[on] = (other < 0) | ~kept[np.maximum(other, 0)]
+        vsel, t = hit[on], sv[on]
+        if len(vsel):
+            surf = surface_of_voxel[t]
+            _label_by_plane_of(
+                grid, planes, t, vsel, surf, band.width(surf, vsel), labels, best, True
+            )
+    new = labels[(labels >= 0) & (before < 0)]
+    return np.bincount(new, minlength=len(kept))
+
+
+# A voxel's own plane leaving its window's by more than this many noise sigmas is not the
+# surface's (see label_in_band).
+_OFF_SIGMAS = 2.0
+
+
+def _miss(grid: VoxelGrid, own: _Planes, window: _Planes, sv: np.ndarray) -> np.ndarray:
+    """(K,) the largest height difference of two planes of the voxels ``sv`` over each
+    voxel's x, y square, metres."""
+    a0, bx0, by0 = _plane_in(grid, own.mean[sv], own.normal[sv], sv)
+    a1, bx1, by1 = _plane_in(grid, window.mean[sv], window.normal[sv], sv)
+    miss = np.zeros(len(sv))
+    for cx in (0.0, grid.size[0]):
+        for cy in (0.0, grid.size[1]):
+            miss = np.maximum(miss, np.abs((a0 - a1) + (bx0 - bx1) * cx + (by0 - by1) * cy))
+    return miss
+
+
+# A surface voxel holds clutter when this share of the points in it and in the voxel above
+# it are on no surface.
+_CLUTTER_SHARE = 0.05
+
+
+def _cluttered(
+    grid: VoxelGrid, index: KeyIndex, surface_of_voxel: np.ndarray, labels: np.ndarray
+) -> np.ndarray:
+    """The surface voxels (indices) holding clutter, in them or just above them."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    off = np.add.reduceat((labels < 0).astype(np.int64), grid.starts) if len(labels) else None
+    if off is None or len(sv) == 0:
+        return np.zeros(0, np.int64)
+    (up,) = index.neighbours_many(sv, [(0, 0, 1)], grid.keys)
+    loose = off[sv] + np.where(up >= 0, off[np.maximum(up, 0)], 0)
+    total = grid.counts[sv] + np.where(up >= 0, grid.counts[np.maximum(up, 0)], 0)
+    return sv[loose >= _CLUTTER_SHARE * total]
+
+
+# The window of voxels whose inliers refit a surface voxel's plane (3 x 3 columns, +-1 layer).
+_WINDOW = [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)]
+
+
+def refit_planes(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    labels: np.ndarray,
+    which: np.ndarray,
+) -> None:
+    """Refit, in place, each surface voxel's plane to the labelled points of its surface in
+    the voxels around it (3 x 3 columns): a voxel holding an object's foot fits a plane
+    tilted toward it, which a narrow band then misses on the table side; its neighbours'
+    inliers outvote the foot. labels: (N,) surface component per point in the grid's voxel
+    order, -1 for none; which: (C,) bool, the components refitted."""
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    sv = sv[which[surface_of_voxel[sv]]]
+    at = np.flatnonzero(labels >= 0)
+    if len(sv) == 0 or len(at) == 0:
+        return
+    from supportnode.kernels.runs import run_moments
+
+    n_vox = len(grid.counts)
+    # Moments per voxel of its labelled points (one compiled pass over runs of the grid's
+    # columns, about each voxel's corner), then about the grid's origin (metres).
+    vox = np.searchsorted(grid.starts, at, side="right") - 1
+    run = np.flatnonzero(np.r_[True, vox[1:] != vox[:-1]])
+    v = vox[run]
+    loc1, loc2, _, _ = run_moments(grid.local, at, run)
+    n = np.diff(np.r_[run, len(at)]).astype(np.float64)
+    corner = grid.keys[v] * grid.size
+    count = np.zeros(n_vox)
+    count[v] = n
+    s1 = [np.zeros(n_vox) for _ in range(3)]
+    for a in range(3):
+        s1[a][v] = loc1[:, a] + n * corner[:, a]
+    s2 = [np.zeros(n_vox) for _ in range(6)]
+    for q, (a, b) in enumerate(OUTER_INDEX):
+        s2[q][v] = (
+            loc2[:, q]
+            + corner[:, a] * loc1[:, b]
+            + corner[:, b] * loc1[:, a]
+            + n * corner[:, a] * corner[:, b]
+        )
+    lab_of_voxel = np.full(n_vox, -1, np.int64)
+    lab_of_voxel[vox] = labels[at]
+    own = surface_of_voxel[sv]
+    c = np.zeros(len(sv))
+    t1 = [np.zeros(len(sv)) for _ in range(3)]
+    t2 = [np.zeros(len(sv)) for _ in range(6)]
+    for j in index.neighbours_many(sv, _WINDOW, grid.keys):
+        ok = j >= 0
+        ok[ok] = lab_of_voxel[j[ok]] == own[ok]
+        jj = np.where(ok, j, 0)
+        w = np.where(ok, 1.0, 0.0)
+        c += w * count[jj]
+        for a in range(3):
+            t1[a] += w * s1[a][jj]
+        for k in range(6):
+            t2[k] += w * s2[k][jj]
+    fit = c >= 3
+    mean = [t1[a][fit] / c[fit] for a in range(3)]
+    entries = [t2[k][fit] / c[fit] - mean[a] * mean[b] for k, (a, b) in enumerate(OUTER_INDEX)]
+    _, normal = sym3_eigen_entries(*entries)
+    normal = np.where(normal[:, 2:3] < 0, -normal, normal)
+    level = normal[:, 2] > 0.5  # a degenerate window keeps its voxel's own plane
+    to = sv[fit][level]
+    new_mean, new_normal = np.stack(mean, axis=1)[level], normal[level]
+    planes.mean[to] = new_mean
+    planes.normal[to] = new_normal
+
+
+def drop_raised(
+    grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, band: Band, cell: float
+) -> np.ndarray:
+    """Unlabel, in place, the points of raised patches of a surface's band: columns about
+    ``cell`` wide whose points lie on average more than ``_RAISED_SIGMAS`` sigma above their
+    plane, joined into patches of at least ``_RAISED_MIN_AREA`` m^2. The table's own points
+    average zero; a pot's inner bottom a few millimetres above it (or a sheet lying on it)
+    does not, though each of its points is within the band. Only surfaces the band decides.
+    Returns the positions (grid order) unlabelled."""
+    none = np.zeros(0, np.int64)
+    at = np.flatnonzero(labels >= 0)
+    at = at[band.by_band[labels[at]]]
+    if len(at) == 0:
+        return none
+    # Columns within each voxel (a whole number of them per voxel edge): grouped without a
+    # sort, by the voxel and the column's place in it.
+    per = np.maximum(np.round(grid.size[:2] / cell).astype(np.int64), 1)
+    vox = np.searchsorted(grid.starts, at, side="right") - 1
+    li = np.minimum((grid.local[0][at] / grid.size[0] * per[0]).astype(np.int64), per[0] - 1)
+    lj = np.minimum((grid.local[1][at] / grid.size[1] * per[1]).astype(np.int64), per[1] - 1)
+    key = (vox * per[0] + li) * per[1] + lj
+    n_keys = len(grid.counts) * per[0] * per[1]
+    n = np.bincount(key, minlength=n_keys)
+    mean = np.bincount(key, best[at], minlength=n_keys) / np.maximum(n, 1)
+    comp = np.full(len(grid.counts), -1, np.int64)
+    comp[vox] = labels[at]
+    r = np.zeros(len(comp)) if band.r_voxel is None else band.r_voxel
+    sigma = band.model.sigma(np.maximum(comp, 0), r)[np.arange(n_keys) // (per[0] * per[1])]
+    raised = np.flatnonzero(
+        (n >= 4) & (mean > np.maximum(_RAISED_SIGMAS * sigma, 0.5 * band.floor))
+    )
+    if len(raised) == 0:
+        return none
+    # 8-connected patches of raised columns, by their global column and surface.
+    v = raised // (per[0] * per[1])
+    gi = grid.keys[v, 0] * per[0] + (raised // per[1]) % per[0]
+    gj = grid.keys[v, 1] * per[1] + raised % per[1]
+    gi, gj = gi - gi.min() + 1, gj - gj.min() + 1
+    span = int(gj.max()) + 2
+    rk = (comp[v] * (int(gi.max()) + 2) + gi) * span + gj
+    order = np.argsort(rk)
+    rk = rk[order]
+    src, dst = [], []
+    for st in (1, span - 1, span, span + 1):
+        hit = np.searchsorted(rk, rk + st)
+        ok = (hit < len(rk)) & (rk[np.minimum(hit, len(rk) - 1)] == rk + st)
+        src.append(np.flatnonzero(ok))
+        dst.append(hit[ok])
+    patch = label_edges(len(rk), np.concatenate(src), np.concatenate(dst))
+    area = np.bincount(patch) * float(np.prod(grid.size[:2] / per))
+    big = np.zeros(n_keys, bool)
+    big[raised[order][area[patch] >= _RAISED_MIN_AREA]] = True
+    gone = at[big[key]]
+    labels[gone] = -1
+    return gone
+
+
+# k-NN normals vet a surface's points (the clutter test) only where the neighbourhood of
+# clutter_normal_k points is this many noise sigmas wide: on a dense, noisy depth image ten
+# neighbours span a few millimetres, and their normals scatter like the noise.
+_VET_MIN_SIGMAS = 8.0
+
+
+def band_decides(
+    grid: VoxelGrid, labels: np.ndarray, surface_of_voxel: np.ndarray, band: Band, k: int
+) -> np.ndarray:
+    """(C,) bool per surface component: the noise band, not k-NN normals, decides which of
+    its points are on it (a depth camera's surfaces). There the points' k-NN normals say
+    nothing about tilt (their neighbourhood, ~ spacing sqrt(k / pi) wide, is under
+    ``_VET_MIN_SIGMAS`` sigma), while the band is thin against an object (at most a quarter
+    of a voxel's height): the objects' feet are told apart by where the objects stand. On a
+    cloud noisy beyond that (a slab as thick as the objects are tall), neither tells."""
+    n_comp = len(band.model.a)
+    at = np.flatnonzero(labels >= 0)
+    comp = labels[at].astype(np.int64)
+    count = np.bincount(comp, minlength=n_comp).astype(np.float64)
+    sv = np.flatnonzero(surface_of_voxel >= 0)
+    cols = np.unique(
+        np.stack([surface_of_voxel[sv], grid.keys[sv, 0], grid.keys[sv, 1]], 1), axis=0
+    )
+    area = np.bincount(cols[:, 0], minlength=n_comp) * grid.size[0] * grid.size[1]
+    spacing = np.sqrt(area / np.maximum(count, 1.0))
+    # Each component's median range, from its voxels weighted by their labelled points.
+    r_med = np.zeros(n_comp)
+    if band.r_voxel is not None:
+        vox = np.searchsorted(grid.starts, at, side="right") - 1
+        key, w = np.unique(comp * len(grid.counts) + vox, return_counts=True)
+        c, r = key // len(grid.counts), band.r_voxel[key % len(grid.counts)]
+        order = np.lexsort((r, c))
+        cw = np.cumsum(w[order])
+        first = np.searchsorted(c[order], np.arange(n_comp))
+        half = np.r_[0, cw][first] + count / 2.0
+        r_med = r[order][np.minimum(np.searchsorted(cw, half), len(order) - 1)]
+    sigma = band.model.sigma(np.arange(n_comp), r_med)
+    thin = band.sigmas * sigma <= 0.25 * grid.size[2]
+    return (count > 0) & thin & (spacing * np.sqrt(k / np.pi) < _VET_MIN_SIGMAS * sigma)

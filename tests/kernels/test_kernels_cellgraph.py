@@ -1,0 +1,91 @@
+"""The sparse cell grid: window sums and adjacent pairs against brute force, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from supportnode.kernels import runtime
+from supportnode.kernels.cellgraph import CellGrid, _warm
+
+
+def _cells(seed: int, n: int, span: int, pad: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    ijk = np.unique(rng.integers(pad, pad + span, (n, 3)), axis=0)
+    dims = np.full(3, span + 2 * pad)
+    return ijk, dims
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(0, 60),
+    span=st.integers(1, 6),
+    w=st.integers(0, 2),
+    labelled=st.booleans(),
+    seed=st.integers(0, 10_000),
+)
+def test_window_sums_match_brute_force(n, span, w, labelled, seed):
+    ijk, dims = _cells(seed, n, span, 2)
+    rng = np.random.default_rng(seed + 1)
+    mom = rng.normal(size=(len(ijk), 4))
+    label = rng.integers(0, 3, len(ijk)) if labelled else None
+    got = CellGrid(ijk, dims, 2).window_sums(mom, w, label)
+    want = np.zeros_like(mom)
+    for c in range(len(ijk)):
+        near = np.abs(ijk - ijk[c]).max(axis=1) <= w
+        if label is not None:
+            near &= label == label[c]
+        want[c] = mom[near].sum(axis=0)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 80), span=st.integers(1, 6), seed=st.integers(0, 10_000))
+def test_adjacent_pairs_are_every_26_neighbour_pair_once(n, span, seed):
+    ijk, dims = _cells(seed, n, span, 1)
+    src, dst = CellGrid(ijk, dims, 1).adjacent_pairs()
+    got = {(min(a, b), max(a, b)) for a, b in zip(src.tolist(), dst.tolist(), strict=True)}
+    assert len(got) == len(src)  # each pair once
+    d = np.abs(ijk[:, None, :] - ijk[None, :, :]).max(axis=2)
+    want = {(a, b) for a, b in zip(*np.nonzero(np.triu(d == 1)), strict=True)}
+    assert got == want
+
+
+def test_empty_and_one_cell():
+    g = CellGrid(np.zeros((0, 3), np.int64), np.array([3, 3, 3]), 1)
+    assert g.window_sums(np.zeros((0, 10)), 1).shape == (0, 10)
+    assert all(len(x) == 0 for x in g.adjacent_pairs())
+    g = CellGrid(np.array([[1, 1, 1]]), np.array([3, 3, 3]), 1)
+    np.testing.assert_array_equal(g.window_sums(np.ones((1, 2)), 1), [[1.0, 1.0]])
+    assert all(len(x) == 0 for x in g.adjacent_pairs())
+
+
+def test_coordinates_at_the_packing_limits():
+    """Cells at the padded grid's extreme corners find each other and nothing beyond."""
+    dims = np.array([9, 7, 5])
+    ijk = np.array([[2, 2, 2], [6, 4, 2], [5, 3, 1 + 1]])
+    g = CellGrid(ijk, dims, 2)
+    s = g.window_sums(np.eye(3), 2)
+    np.testing.assert_array_equal(s.diagonal(), [1, 1, 1])
+    assert s[1, 2] == 1 and s[2, 1] == 1 and s[0, 1] == 0
+
+
+def test_bad_input_is_refused_before_the_kernel():
+    with pytest.raises(ValueError, match="inside the grid"):
+        CellGrid(np.array([[0, 1, 1]]), np.array([3, 3, 3]), 1)
+    with pytest.raises(ValueError, match="too large"):
+        CellGrid(np.array([[1, 1, 1]]), np.array([2**21, 2**21, 2**21]), 1)
+    g = CellGrid(np.array([[2, 2, 2]]), np.array([5, 5, 5]), 2)
+    with pytest.raises(ValueError, match="padding"):
+        g.window_sums(np.ones((1, 2)), 3)
+    with pytest.raises(ValueError, match="a row per cell"):
+        g.window_sums(np.ones((2, 2)), 1)
+    with pytest.raises(ValueError, match="one per cell"):
+        g.window_sums(np.ones((1, 2)), 1, np.zeros(3))
+
+
+def test_warm_up_is_registered():
+    assert _warm in runtime._WARMERS
+    runtime.warm(["cellgraph"])
