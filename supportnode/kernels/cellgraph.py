@@ -119,70 +119,64 @@ def _pairs(
 
 
 @njit(cache=True)
-def _nearest(
-    pts: np.ndarray,
-    first: np.ndarray,
-    ijk: np.ndarray,
-    dims: np.ndarray,
-    tk: np.ndarray,
-    tv: np.ndarray,
-    shift: int,
-    cell_of: np.ndarray,
-    query: np.ndarray,
-) -> np.ndarray:
-    out = np.full(query.size, np.inf)
-    for r in range(query.size):
-        p = query[r]
-        c = cell_of[p]
-        best = np.inf
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                base = ((ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy) * dims[2] + ijk[c, 2]
-                for dz in range(-1, 2):
-                    j = _find(tk, tv, shift, base + dz)
-                    if j < 0:
-                        continue
-                    for q in range(first[j], first[j + 1]):
-                        if q != p:
-                            d = (
-                                (pts[q, 0] - pts[p, 0]) ** 2
-                                + (pts[q, 1] - pts[p, 1]) ** 2
-                                + (pts[q, 2] - pts[p, 2]) ** 2
-                            )
-                            if d < best:
-                                best = d
-        out[r] = np.sqrt(best)
-    return out
+def _bin_points(
+    ijk: np.ndarray, rel: np.ndarray, dims: np.ndarray, bits: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    cap = 1 << bits
+    shift = 64 - bits
+    mask = cap - 1
+    tk = np.full(cap, -1, np.int64)
+    tv = np.empty(cap, np.int64)
+    m = ijk.shape[0]
+    of_point = np.empty(m, np.int64)
+    cells = np.empty((m, 3), np.int64)
+    mom = np.zeros((m, MOMENTS))
+    n = 0
+    for p in range(m):
+        key = (ijk[p, 0] * dims[1] + ijk[p, 1]) * dims[2] + ijk[p, 2]
+        pos = _home(key, shift)
+        while tk[pos] != -1 and tk[pos] != key:
+            pos = (pos + 1) & mask
+        if tk[pos] == -1:
+            tk[pos] = key
+            tv[pos] = n
+            cells[n, 0], cells[n, 1], cells[n, 2] = ijk[p, 0], ijk[p, 1], ijk[p, 2]
+            n += 1
+        c = tv[pos]
+        of_point[p] = c
+        x, y, z = rel[p, 0], rel[p, 1], rel[p, 2]
+        mom[c, 0] += 1.0
+        mom[c, 1] += x
+        mom[c, 2] += y
+        mom[c, 3] += z
+        mom[c, 4] += x * x
+        mom[c, 5] += y * y
+        mom[c, 6] += z * z
+        mom[c, 7] += x * y
+        mom[c, 8] += x * z
+        mom[c, 9] += y * z
+    return cells[:n].copy(), of_point, mom[:n].copy(), tk, tv
 
 
-def nearest_distances(points: np.ndarray, query: np.ndarray, cell: float) -> np.ndarray:
-    """(Q,) distance from each of the points ``query`` (Q,) int to its nearest other point of
-    ``points`` (N, 3) float64, metres, looked for within one ``cell`` cell around it (inf
-    when there is none that near): a point spacing without a k-d tree."""
-    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    q = np.ascontiguousarray(query, dtype=np.int64).ravel()
-    if not np.isfinite(pts).all():
-        raise ValueError("points must be finite")
-    if not cell > 0:
-        raise ValueError(f"cell must be > 0, got {cell}")
-    if len(q) and (q.min() < 0 or q.max() >= len(pts)):
-        raise ValueError("query points lie outside the points")
-    if len(q) == 0:
-        return np.zeros(0)
-    ijk = np.floor((pts - pts.min(axis=0)) / cell).astype(np.int64) + 1
-    dims = ijk.max(axis=0) + 2
-    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    order = np.argsort(key, kind="stable")
-    keys, start = np.unique(key[order], return_index=True)
-    cells = np.stack([keys // (dims[1] * dims[2]), (keys // dims[2]) % dims[1], keys % dims[2]], 1)
-    grid = CellGrid(cells, dims, 1)
-    cell_of = np.empty(len(pts), np.int64)
-    cell_of[order] = np.repeat(np.arange(len(keys)), np.diff(np.r_[start, len(pts)]))
-    rank = np.empty(len(pts), np.int64)
-    rank[order] = np.arange(len(pts))
-    first = np.r_[start, len(pts)].astype(np.int64)
-    grid_args = (grid.ijk, grid.dims, grid._tk, grid._tv, grid._shift)
-    return _nearest(pts[order], first, *grid_args, cell_of[order], rank[q])
+def bin_points(rel: np.ndarray, size: float, pad: int) -> tuple[CellGrid, np.ndarray, np.ndarray]:
+    """The occupied ``size`` cells of points ``rel`` (M, 3) float64, metres, all >= 0 (as
+    relative to their least corner): the grid (padded by ``pad`` cells), each point's cell
+    (M,) and each cell's moments (F, 10) (count, x, y, z, xx, yy, zz, xy, xz, yz), in one
+    pass. Cells are numbered in the order their first point comes."""
+    rel = np.ascontiguousarray(rel, dtype=np.float64).reshape(-1, 3)
+    if not np.isfinite(rel).all() or (len(rel) and rel.min() < 0):
+        raise ValueError("points must be finite and relative to their least corner")
+    if not size > 0:
+        raise ValueError(f"cell size must be > 0, got {size}")
+    ijk = np.floor(rel / size).astype(np.int64) + pad
+    dims = (ijk.max(axis=0) if len(ijk) else np.zeros(3, np.int64)) + pad + 1
+    if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+        raise ValueError(f"grid of {dims.tolist()} cells is too large to pack")
+    bits = 4
+    while (1 << bits) < 2 * max(len(rel), 1):
+        bits += 1
+    cells, of_point, mom, tk, tv = _bin_points(ijk, rel, dims, bits)
+    return CellGrid.from_table(cells, dims, pad, tk, tv, 64 - bits), of_point, mom
 
 
 class CellGrid:
@@ -202,6 +196,16 @@ class CellGrid:
         self.ijk, self.dims, self.pad = ijk, dims, int(pad)
         keys = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
         self._tk, self._tv, self._shift = _build(keys)
+
+    @classmethod
+    def from_table(
+        cls, ijk: np.ndarray, dims: np.ndarray, pad: int, tk: np.ndarray, tv: np.ndarray, shift: int
+    ) -> CellGrid:
+        """A grid whose lookup table was built with its cells (see :func:`bin_points`)."""
+        grid = cls.__new__(cls)
+        grid.ijk, grid.dims, grid.pad = ijk, np.asarray(dims, np.int64), int(pad)
+        grid._tk, grid._tv, grid._shift = tk, tv, int(shift)
+        return grid
 
     def window_sums(
         self,
@@ -241,4 +245,4 @@ def _warm() -> None:
     g.window_sums(np.ones((2, MOMENTS)), 1)
     g.window_sums(np.ones((2, MOMENTS)), 1, np.array([0, 1]), np.array([1]))
     g.adjacent_pairs()
-    nearest_distances(np.array([[0.0, 0, 0], [0.001, 0, 0]]), np.array([0]), 0.01)
+    bin_points(np.array([[0.0, 0, 0], [0.001, 0, 0]]), 0.01, 1)

@@ -138,6 +138,7 @@ class Merging(ScanVoxelizer):
         take = np.minimum(counts, room[sel])
         rep = np.repeat(np.arange(len(sel)), take)
         j = np.arange(len(rep)) - np.repeat(np.cumsum(take) - take, take)
+        assert grid.starts is not None  # _by_voxel sorted the voxels' points
         pick = grid.starts[sel][rep] + (j * counts[rep]) // take[rep]
         s = slots[sel]
         dest = s[rep] * k + self._raw_n[s][rep] + j
@@ -204,6 +205,7 @@ class Merging(ScanVoxelizer):
         # (P, k) form, value for value, so are the decisions. rays: per candidate.
         rays = np.bincount(pc, weights=take, minlength=len(vox)).astype(np.int64)  # (C,)
         j = np.arange(int(take.sum())) - np.repeat(np.cumsum(take) - take, take)
+        assert grid.starts is not None  # the candidates' points are sorted by voxel
         pick = np.repeat(grid.starts[pv], take)
         pick += (j * np.repeat(counts, take)) // np.repeat(take, take)
         # Everything relative to the candidate's corner: the sensor, and the scan's points
@@ -248,6 +250,7 @@ class Merging(ScanVoxelizer):
         voxel rather than bunch at one end); they overwrite the oldest ones."""
         k = self.keep_points
         counts, starts = grid.counts, grid.starts
+        assert starts is not None  # the caller sorted the voxels' points
         # Voxels with k points or more (most) refill their whole ring: the pick meant for
         # position (head + j) % k lands there, so each ring row is written once, contiguous,
         # and its head stays put.

@@ -188,7 +188,9 @@ class ScanVoxelizer(StoreState):
             moments[:, 3 + col] = np.bincount(point_voxel, weights=prod, minlength=nvox)
         return _ScanGrid(keys, counts, None, moments, local, point_voxel)
 
-    def _scan_scratch(self, n: int, top: int) -> tuple[np.ndarray, ...]:
+    def _scan_scratch(
+        self, n: int, top: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The compiled voxelizing's scratch (`kernels.scanvoxels.scan_voxels`), kept."""
         return (
             self._buffer("mark", top, np.bool_),

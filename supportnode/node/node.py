@@ -220,7 +220,7 @@ class Node(Closing):
         not slow; publishes Diagnostics every ``node.diagnostics_period`` seconds. Signal
         handlers are installed only from the main thread, and restored on return.
         """
-        restore: dict[int, Any] = {}
+        restore: dict[signal.Signals, Any] = {}
         if handle_signals and threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 restore[sig] = signal.signal(sig, lambda *_: self._stop.set())

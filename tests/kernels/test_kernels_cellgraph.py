@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from supportnode.kernels import runtime
-from supportnode.kernels.cellgraph import CellGrid, _warm
+from supportnode.kernels.cellgraph import CellGrid, _warm, bin_points
 
 
 def _cells(seed: int, n: int, span: int, pad: int) -> tuple[np.ndarray, np.ndarray]:
@@ -89,3 +89,23 @@ def test_bad_input_is_refused_before_the_kernel():
 def test_warm_up_is_registered():
     assert _warm in runtime._WARMERS
     runtime.warm(["cellgraph"])
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(0, 400), size=st.sampled_from([0.005, 0.02, 0.1]), seed=st.integers(0, 9999))
+def test_bin_points_matches_numpy_grouping(n, size, seed):
+    rng = np.random.default_rng(seed)
+    rel = rng.uniform(0.0, 0.2, (n, 3))
+    grid, of_point, mom = bin_points(rel, size, 2)
+    assert len(of_point) == n and mom.shape == (len(grid.ijk), 10)
+    ijk = np.floor(rel / size).astype(np.int64) + 2
+    np.testing.assert_array_equal(grid.ijk[of_point], ijk)  # each point in its cell
+    assert len(np.unique(grid.ijk, axis=0)) == len(grid.ijk)
+    for c in range(len(grid.ijk)):
+        p = rel[of_point == c]
+        want = [len(p), *p.sum(0), *(p * p).sum(0), *(p[:, [0, 0, 1]] * p[:, [1, 2, 2]]).sum(0)]
+        np.testing.assert_allclose(mom[c], want, rtol=1e-12, atol=1e-14)
+    # the grid's lookup finds every cell
+    if len(grid.ijk):
+        s = grid.window_sums(np.eye(len(grid.ijk)), 0)
+        np.testing.assert_array_equal(s, np.eye(len(grid.ijk)))

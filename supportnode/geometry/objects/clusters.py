@@ -97,6 +97,7 @@ def _cluster_voxel(
         r, c = r[same], c[same]
     graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(nv, nv))
     _, comp = connected_components(graph.tocsr(), directed=False)
+    stats["_voxel_of_point"] = inv.ravel()  # for the convex method's density test
     return comp[inv.ravel()].astype(np.int64)
 
 

@@ -27,7 +27,6 @@ from supportnode.geometry.objects.faces import (
 )
 from supportnode.geometry.objects.stacks import cut_stacks
 from supportnode.geometry.surfaces import Surface
-from supportnode.kernels.cellgraph import nearest_distances
 from supportnode.kernels.components import label_edges
 from supportnode.params import ObjectParams
 
@@ -244,17 +243,16 @@ def cluster_convex(
 
     The candidates' connected voxels (:func:`clusters._cluster_voxel`, as the voxel method)
     that are sampled densely enough to show faces (a depth camera's view: a cell of
-    ``convex_cell``, or 1.5 or 2.25 times it, wide against the points' spacing and noise)
+    ``convex_cell``, or 1.5 times it, wide against the points' spacing)
     are segmented by local convexity on cells of that size; sparser ones (a lidar's far
     returns, a thinly sampled map) stay whole, to be split by their footprints. In the dense
     ones the points in the noise band of the surface under them (support: (M,) its id, -1
     for none) are the table's and never link two objects: the surface's own band
     (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
     comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
+    voxel = stats.pop("_voxel_of_point", np.zeros(len(cp), np.int64))
     above, band, sigma = _band(cp, support, surfaces, origin)
-    level, window = _cell_level(
-        cp, comp, sigma, params.convex_cell, params.convex_normal_cells, params.min_points
-    )
+    level, window = _cell_level(cp, comp, voxel, sigma, params)
     dense = level < len(_CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
     out = np.where(dense[comp], -1, comp)
@@ -298,60 +296,59 @@ def cluster_convex(
 # _CELL_PER_SPACING times its points' spacing (its surfaces stay connected cell to cell, and
 # a gap a few spacings wide still cuts); sparser components are not segmented. Its normals'
 # window spans at least _WINDOW_SIGMAS noise sigmas (at most _MAX_WINDOW cells each side).
-# Spacing and noise are measured on up to _SPACING_SAMPLES points of each component.
-_CELL_STEPS = (1.0, 1.5, 2.25)
+_CELL_STEPS = (1.0, 1.5)
 _CELL_PER_SPACING = 2.5
 _WINDOW_SIGMAS = 8.0
 _MAX_WINDOW = 5
-_SPACING_SAMPLES = 200
+# The point spacing over cluster_cell / sqrt(points per occupied voxel) (see _cell_level).
+_SPACING_PER_VOXEL = 0.75
+# Groups wider than this in x or y are room structure, not objects (metres).
+_MAX_EXTENT = 1.5
 
 
 def _cell_level(
     cp: np.ndarray,
     comp: np.ndarray,
+    voxel: np.ndarray,
     sigma: np.ndarray,
-    cell: float,
-    min_window: int,
-    min_points: int,
+    params: ObjectParams,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per component (C,): the index in _CELL_STEPS of its cell size (len(_CELL_STEPS) when
-    even the largest is finer than its points' spacing), and its normal window in cells
-    (at least ``min_window``). sigma: (M,) each point's noise (its surface's at its range; 0
-    when unknown), metres."""
+    even the largest is finer than its points' spacing, when it is smaller than
+    ``params.min_points`` or wider than room structure), and its normal window in cells.
+    voxel: (M,) each point's voxel of the clustering grid (``cluster_cell``); sigma: (M,)
+    each point's noise (its surface's at its range; 0 when unknown), metres.
+
+    The spacing comes from the points per occupied voxel (a surface sampled every s metres
+    puts about (cluster_cell / s)^2 in one, noise or not: 0.75 of that, measured against
+    nearest neighbours on real and simulated depth images)."""
     n = int(comp.max()) + 1 if len(comp) else 0
+    level = np.full(n, len(_CELL_STEPS), np.int64)
+    window = np.full(n, params.convex_normal_cells, np.int64)
     if n == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    # A few evenly spread points of each component: their nearest other point's distance.
-    # Components too small to keep are left sparse (no samples, no tree for them).
+        return level, window
+    size = np.bincount(comp, minlength=n)
+    per_point = np.bincount(voxel)[voxel].astype(np.float64)
+    per_voxel = np.bincount(comp, per_point, n) / np.maximum(size, 1)
+    spacing = _SPACING_PER_VOXEL * params.cluster_cell / np.sqrt(np.maximum(per_voxel, 1e-9))
+    need = _CELL_PER_SPACING * spacing / params.convex_cell  # in convex cells
+    big = (size >= params.min_points) & (need <= _CELL_STEPS[-1])
+    if not big.any():
+        return level, window
     order = np.argsort(comp, kind="stable")
     bounds = np.searchsorted(comp[order], np.arange(n + 1))
-    size = np.diff(bounds)
-    big = size >= min_points
-    if not big.any():
-        return np.full(n, len(_CELL_STEPS), np.int64), np.full(n, min_window, np.int64)
-    take = np.where(big, np.minimum(size, _SPACING_SAMPLES), 0)
-    rank = np.arange(take.sum()) - np.repeat(np.cumsum(take) - take, take)
-    pick = order[np.repeat(bounds[:-1], take) + rank * np.repeat(size // np.maximum(take, 1), take)]
-    # Nearest neighbours looked for within a cell of the largest size (farther is sparse),
-    # among the points of the components kept.
-    keep = np.flatnonzero(big[comp])
-    rank = np.full(len(cp), -1, np.int64)
-    rank[keep] = np.arange(len(keep))
-    dist = nearest_distances(cp[keep], rank[pick], cell * _CELL_STEPS[-1])
-    owner = comp[pick]
-    spacing = np.zeros(n)
     noise = np.zeros(n)
-    for values, out in ((dist, spacing), (sigma[pick], noise)):
-        srt = np.lexsort((values, owner))
-        mid = np.searchsorted(owner[srt], np.arange(n)) + take // 2
-        out[:] = values[srt][np.minimum(mid, len(srt) - 1)]
-    need = _CELL_PER_SPACING * spacing / cell  # in convex cells
-    level = np.full(n, len(_CELL_STEPS), np.int64)
-    for k in reversed(range(len(_CELL_STEPS))):
-        level[big & (_CELL_STEPS[k] >= need)] = k
+    for k in np.flatnonzero(big):
+        mine = order[bounds[k] : bounds[k + 1]]
+        # Room structure (a wall, a shelf's frame) is no object to part at its creases.
+        big[k] = np.ptp(cp[mine, :2], axis=0).max() <= _MAX_EXTENT
+        noise[k] = np.median(sigma[mine[:: max(1, len(mine) // 200)]])
+    for step_k in reversed(range(len(_CELL_STEPS))):
+        level[big & (_CELL_STEPS[step_k] >= need)] = step_k
     step = np.asarray(_CELL_STEPS + (_CELL_STEPS[-1],))[level]
-    window = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * cell * step)).astype(np.int64)
-    return level, np.clip(window, min_window, max(min_window, _MAX_WINDOW))
+    wide = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * params.convex_cell * step)).astype(np.int64)
+    low = params.convex_normal_cells
+    return level, np.clip(wide, low, max(low, _MAX_WINDOW))
 
 
 def _band(

@@ -28,7 +28,7 @@ from supportnode.geometry.objects.clusters import (
 )
 from supportnode.geometry.objects.convexity import cluster_convex
 from supportnode.geometry.objects.describe import _describe, _stack
-from supportnode.geometry.objects.feet import claim_enclosed, claim_feet, claim_raised
+from supportnode.geometry.objects.feet import claim_feet, claim_raised
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -137,11 +137,6 @@ def cluster_objects(
     return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed)
 
 
-# The inside of a bowl or a pot (its bottom in the table's band) is at most this large, m^2.
-_MAX_INSIDE = 0.1
-# ... and its points lie this much above the table on average (table seen between objects
-# does not), metres.
-_MIN_RAISE = 0.002
 # The band points searched for feet lie within this of the objects' x, y box, metres.
 _AROUND = 0.05
 
@@ -184,9 +179,6 @@ def _claim_feet(
     cell = params.convex_cell
     owner = claim_feet(
         band_xyz, band_surf, height, cp, lab, support, height, cell, params.foot_reach
-    )
-    owner = claim_enclosed(
-        band_xyz, band_surf, height, owner, cp, lab, cell, _MAX_INSIDE, _MIN_RAISE
     )
     raised = np.r_[is_raised[on], is_raised[cand[loose]]]
     owner = claim_raised(

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
-from supportnode.kernels.cellgraph import CellGrid
+from supportnode.kernels.cellgraph import CellGrid, bin_points
 from supportnode.kernels.components import label_edges
 
 # Moment columns' (a, b) pairs in the order of linalg's entries (xx, yy, zz, xy, xz, yz).
@@ -43,24 +43,9 @@ class Cells:
 def make_cells(pts: np.ndarray, size: float, pad: int) -> Cells:
     """The occupied ``size`` cells of (M, 3) points, metres, padded by ``pad`` cells."""
     base = pts.min(axis=0)
-    rel = pts - base
-    ijk = np.floor(rel / size).astype(np.int64) + pad
-    dims = ijk.max(axis=0) + pad + 1
-    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
-    keys, of_point = np.unique(key, return_inverse=True)
-    of_point = of_point.reshape(-1)
-    cell_ijk = np.stack(
-        [keys // (dims[1] * dims[2]), (keys // dims[2]) % dims[1], keys % dims[2]], axis=1
-    )
-    n = len(keys)
-    mom = np.empty((n, 10))
-    mom[:, 0] = np.bincount(of_point, minlength=n)
-    for a in range(3):
-        mom[:, 1 + a] = np.bincount(of_point, rel[:, a], n)
-    for q, (a, b) in enumerate(_OUTER):
-        mom[:, 4 + q] = np.bincount(of_point, rel[:, a] * rel[:, b], n)
+    grid, of_point, mom = bin_points(pts - base, size, pad)
     centroid = mom[:, 1:4] / mom[:, :1] + base
-    return Cells(of_point, CellGrid(cell_ijk, dims, pad), mom, centroid, base, float(size))
+    return Cells(of_point, grid, mom, centroid, base, float(size))
 
 
 def window_normals(

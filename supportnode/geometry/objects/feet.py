@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-# The largest raster (cells) of an object's feet or of the objects' joint footprint.
+# The largest raster (cells) of an object's feet or of the raised patches around them.
 _MAX_RASTER = 4_000_000
-# The joint footprint is closed by this many cells before its holes are filled.
-_CLOSE_CELLS = 4
 
 
 def claim_feet(
@@ -63,59 +61,6 @@ def claim_feet(
         )
         qij = np.minimum(np.floor((xyz[q, :2] - lo) / cell).astype(np.int64), shape - 1)
         out[q] = owner[qij[:, 0], qij[:, 1]]
-    return out
-
-
-def claim_enclosed(
-    xyz: np.ndarray,
-    surface: np.ndarray,
-    height: np.ndarray,
-    owner: np.ndarray,
-    obj_xyz: np.ndarray,
-    obj_label: np.ndarray,
-    cell: float,
-    max_area: float,
-    min_raise: float,
-) -> np.ndarray:
-    """``owner`` (K,) with the band points enclosed by objects added: a bowl's or a pot's
-    inner bottom lies in the table's band, ringed in x, y by its walls and rim (which may be
-    segments of their own). The joint footprint of the objects (the columns of their points,
-    closed by one cell) has its holes filled; the band points of a hole of at most
-    ``max_area`` m^2 that lie on average ``min_raise`` or more above their surface (a pot's
-    bottom is a few millimetres thick; table seen between objects is not raised) go to the
-    object holding most of the hole's rim. Arguments as for :func:`claim_feet`."""
-    from scipy import ndimage
-
-    out = owner.copy()
-    free = np.flatnonzero(out < 0)
-    idx = np.flatnonzero(obj_label >= 0)
-    if len(idx) == 0 or len(free) == 0:
-        return out
-    lo = obj_xyz[idx, :2].min(axis=0) - 2 * cell
-    shape = np.floor((obj_xyz[idx, :2].max(axis=0) - lo) / cell).astype(np.int64) + 3
-    if shape[0] * shape[1] > _MAX_RASTER:
-        return out
-    ij = np.floor((obj_xyz[idx, :2] - lo) / cell).astype(np.int64)
-    who = np.full(shape, -1, np.int64)  # an object of each occupied column (the last)
-    who[ij[:, 0], ij[:, 1]] = obj_label[idx]
-    # Closed across a few cells: a wall seen edge-on, at the sides of a bowl, leaves gaps.
-    img = ndimage.binary_closing(who >= 0, iterations=_CLOSE_CELLS, border_value=0)
-    holes, n_holes = ndimage.label(ndimage.binary_fill_holes(img) & ~img)
-    if n_holes == 0:
-        return out
-    qij = np.floor((xyz[free, :2] - lo) / cell).astype(np.int64)
-    inside = np.all((qij >= 0) & (qij < shape), axis=1)
-    q, qij = free[inside], qij[inside]
-    hole_of = holes[qij[:, 0], qij[:, 1]]
-    q, hole_of = q[hole_of > 0], hole_of[hole_of > 0]
-    area = np.bincount(holes.ravel(), minlength=n_holes + 1) * cell * cell
-    for h in np.unique(hole_of):
-        mine = q[hole_of == h]
-        raised = np.mean(xyz[mine, 2] - height[surface[mine]])
-        if area[h] > max_area or raised < min_raise:
-            continue
-        ring = ndimage.binary_dilation(holes == h) & (who >= 0)
-        out[mine] = np.bincount(who[ring]).argmax()
     return out
 
 
