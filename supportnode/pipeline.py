@@ -86,6 +86,9 @@ class Early:
     free: list[FreeSpace]
     components: Components
     timings: dict[str, float]  # seconds: objects (so far), free_space; objects_stage adds
+    # (points, sensor origin) when the objects' own components are still to be found: the
+    # convex segmentation, deferred past the surfaces (see surfaces_stage).
+    pending: tuple[np.ndarray, np.ndarray | None] | None = None
 
 
 def surfaces_stage(
@@ -104,7 +107,16 @@ def surfaces_stage(
     in the detection frame when known (the convex method's noise band follows its range)."""
     timings = {} if timings is None else timings
     t = time.perf_counter()
-    components = cluster_objects(pts, surfaces, params.objects, sensor_origin=sensor_origin)
+    pending = None
+    objects = params.objects
+    if objects.method == "convex" and not any(s.band[0] > 0 for s in surfaces.surfaces):
+        # No surface with a noise band (a lidar's, a map's): no object claims its feet from
+        # a surface, so the surfaces are final now, and free space needs only the connected
+        # voxels (what the convex segmentation parts stays on the same surface). The
+        # segmentation, tens of ms on a dense view, waits for objects_stage.
+        pending = (pts, sensor_origin)
+        objects = replace(objects, method="voxel")
+    components = cluster_objects(pts, surfaces, objects, sensor_origin=sensor_origin)
     if len(components.claimed):
         # An object's foot is the object's, no longer the surface's.
         labels = surfaces.labels.copy()
@@ -117,14 +129,18 @@ def surfaces_stage(
         below = replace(surfaces, surfaces=[s for s in surfaces.surfaces if s.height < free_below])
     free = free_space_all(below, components.segmentation, pts, params.freespace)
     timings["free_space"] = time.perf_counter() - t
-    return Early(surfaces, free, components, timings)
+    return Early(surfaces, free, components, timings, pending)
 
 
 def objects_stage(early: Early, params: DetectParams, memo: Memo | None = None) -> ObjectResult:
     """The objects of `surfaces_stage`'s components: touching objects split, then described
     (hulls, boxes); adds its time to ``early.timings["objects"]``."""
     t = time.perf_counter()
-    segmentation = split_objects(early.components, params.objects, memo)
+    components = early.components
+    if early.pending is not None:
+        pts, origin = early.pending
+        components = cluster_objects(pts, early.surfaces, params.objects, sensor_origin=origin)
+    segmentation = split_objects(components, params.objects, memo)
     result = describe_objects(segmentation, memo)
     early.timings["objects"] = early.timings.get("objects", 0.0) + time.perf_counter() - t
     return result

@@ -337,11 +337,15 @@ def _cell_level(
         return level, window
     order = np.argsort(comp, kind="stable")
     bounds = np.searchsorted(comp[order], np.arange(n + 1))
+    # Room structure (a wall, a shelf's frame) is no object to part at its creases.
+    starts = bounds[:-1][size > 0]
+    for a in range(2):  # per component at once, a column at a time
+        col = cp[:, a][order]
+        extent = np.maximum.reduceat(col, starts) - np.minimum.reduceat(col, starts)
+        big[size > 0] &= extent <= _MAX_EXTENT
     noise = np.zeros(n)
     for k in np.flatnonzero(big):
         mine = order[bounds[k] : bounds[k + 1]]
-        # Room structure (a wall, a shelf's frame) is no object to part at its creases.
-        big[k] = np.ptp(cp[mine, :2], axis=0).max() <= _MAX_EXTENT
         noise[k] = np.median(sigma[mine[:: max(1, len(mine) // 200)]])
     for step_k in reversed(range(len(_CELL_STEPS))):
         level[big & (_CELL_STEPS[step_k] >= need)] = step_k

@@ -23,6 +23,7 @@ from supportnode.geometry.surfaces.planar import (
     _Planes,
 )
 from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
+from supportnode.kernels.band import column_sums, points_in_columns
 from supportnode.kernels.components import label_edges
 from supportnode.params import SurfaceParams
 
@@ -350,22 +351,15 @@ def drop_raised(
     does not, though each of its points is within the band. Only surfaces the band decides.
     Returns the positions (grid order) unlabelled."""
     none = np.zeros(0, np.int64)
-    at = np.flatnonzero(labels >= 0)
-    at = at[band.by_band[labels[at]]]
-    if len(at) == 0:
+    if not band.by_band.any():
         return none
     # Columns within each voxel (a whole number of them per voxel edge): grouped without a
     # sort, by the voxel and the column's place in it.
     per = np.maximum(np.round(grid.size[:2] / cell).astype(np.int64), 1)
-    vox = np.searchsorted(grid.starts, at, side="right") - 1
-    li = np.minimum((grid.local[0][at] / grid.size[0] * per[0]).astype(np.int64), per[0] - 1)
-    lj = np.minimum((grid.local[1][at] / grid.size[1] * per[1]).astype(np.int64), per[1] - 1)
-    key = (vox * per[0] + li) * per[1] + lj
-    n_keys = len(grid.counts) * per[0] * per[1]
-    n = np.bincount(key, minlength=n_keys)
-    mean = np.bincount(key, best[at], minlength=n_keys) / np.maximum(n, 1)
-    comp = np.full(len(grid.counts), -1, np.int64)
-    comp[vox] = labels[at]
+    cols = (grid.starts, grid.counts, grid.local, grid.size, labels, band.by_band)
+    n, total, comp = column_sums(*cols, best, per)
+    n_keys = len(n)
+    mean = total / np.maximum(n, 1)
     r = np.zeros(len(comp)) if band.r_voxel is None else band.r_voxel
     sigma = band.model.sigma(np.maximum(comp, 0), r)[np.arange(n_keys) // (per[0] * per[1])]
     raised = np.flatnonzero(
@@ -392,7 +386,7 @@ def drop_raised(
     area = np.bincount(patch) * float(np.prod(grid.size[:2] / per))
     big = np.zeros(n_keys, bool)
     big[raised[order][area[patch] >= _RAISED_MIN_AREA]] = True
-    gone = at[big[key]]
+    gone = points_in_columns(*cols, big, per)
     labels[gone] = -1
     return gone
 

@@ -1,0 +1,182 @@
+"""One pass over a scan's points for what lies in a surface's noise band.
+
+The band steps (raised patches of a table's band, the objects' feet) each picked the band's
+points out of a whole depth image with numpy: a mask, a gather, a sort key per point, then a
+reduction, several passes over ~300k points for a few thousand that matter. Here each is one
+loop over the points, in grid order where a grid is given.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from supportnode.kernels.runtime import warmer
+
+
+@njit(cache=True)
+def _column_sums(
+    starts: np.ndarray,
+    counts: np.ndarray,
+    lx: np.ndarray,
+    ly: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    value: np.ndarray,
+    col: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    per0, per1 = col[0], col[1]
+    n_keys = starts.size * per0 * per1
+    n = np.zeros(n_keys, np.int64)
+    total = np.zeros(n_keys)
+    comp = np.full(starts.size, -1, np.int64)
+    for v in range(starts.size):
+        for i in range(starts[v], starts[v] + counts[v]):
+            lab = labels[i]
+            if lab < 0 or not use[lab]:
+                continue
+            li = min(int(lx[i] * per0), per0 - 1)
+            lj = min(int(ly[i] * per1), per1 - 1)
+            key = (v * per0 + li) * per1 + lj
+            n[key] += 1
+            total[key] += value[i]
+            comp[v] = lab
+    return n, total, comp
+
+
+def column_sums(
+    starts: np.ndarray,
+    counts: np.ndarray,
+    local: list[np.ndarray],
+    size: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    value: np.ndarray,
+    per: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column of each voxel (``per`` (2,) columns along x and y of a voxel ``size`` (3,)
+    metres): the count (V * per0 * per1,) and the sum of ``value`` (N,) over the points in
+    grid order whose label (N,) is a surface marked in ``use`` (S,) bool; and each voxel's
+    surface (V,) (the last such label; -1 for none). Voxel v's points are
+    ``starts[v] : starts[v] + counts[v]``; ``local``: their x, y, z in the voxel, metres.
+    Column keys are ``(v * per0 + i) * per1 + j``."""
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    lab = np.ascontiguousarray(labels, dtype=np.int64)
+    val = np.ascontiguousarray(value, dtype=np.float64)
+    if len(lab) != len(val) or len(starts) != len(counts):
+        raise ValueError("labels and values, starts and counts must match in length")
+    if len(starts) and (starts + counts).max() > len(lab):
+        raise ValueError("a voxel's points lie outside the points")
+    if len(lab) and lab.max() >= len(use):
+        raise ValueError("a label has no entry in use")
+    col = np.ascontiguousarray(per, dtype=np.int64)
+    lx = np.ascontiguousarray(local[0], dtype=np.float64) / float(size[0])
+    ly = np.ascontiguousarray(local[1], dtype=np.float64) / float(size[1])
+    return _column_sums(starts, counts, lx, ly, lab, np.asarray(use, np.bool_), val, col)
+
+
+@njit(cache=True)
+def _in_columns(
+    starts: np.ndarray,
+    counts: np.ndarray,
+    lx: np.ndarray,
+    ly: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    flagged: np.ndarray,
+    col: np.ndarray,
+) -> np.ndarray:
+    per0, per1 = col[0], col[1]
+    out = np.empty(lx.size, np.int64)
+    m = 0
+    for v in range(starts.size):
+        for i in range(starts[v], starts[v] + counts[v]):
+            lab = labels[i]
+            if lab < 0 or not use[lab]:
+                continue
+            li = min(int(lx[i] * per0), per0 - 1)
+            lj = min(int(ly[i] * per1), per1 - 1)
+            if flagged[(v * per0 + li) * per1 + lj]:
+                out[m] = i
+                m += 1
+    return out[:m].copy()
+
+
+def points_in_columns(
+    starts: np.ndarray,
+    counts: np.ndarray,
+    local: list[np.ndarray],
+    size: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    flagged: np.ndarray,
+    per: np.ndarray,
+) -> np.ndarray:
+    """The positions (grid order, ascending) of the points counted by :func:`column_sums`
+    (same arguments) that lie in a column ``flagged`` (V * per0 * per1,) bool."""
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    lab = np.ascontiguousarray(labels, dtype=np.int64)
+    col = np.ascontiguousarray(per, dtype=np.int64)
+    if len(flagged) != len(starts) * int(col[0]) * int(col[1]):
+        raise ValueError("flagged must have one entry per column")
+    if len(starts) and (starts + counts).max() > len(lab):
+        raise ValueError("a voxel's points lie outside the points")
+    lx = np.ascontiguousarray(local[0], dtype=np.float64) / float(size[0])
+    ly = np.ascontiguousarray(local[1], dtype=np.float64) / float(size[1])
+    use_b, flag_b = np.asarray(use, np.bool_), np.asarray(flagged, np.bool_)
+    return _in_columns(starts, counts, lx, ly, lab, use_b, flag_b, col)
+
+
+@njit(cache=True)
+def _band_rows(
+    pts: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    always: np.ndarray,
+) -> np.ndarray:
+    out = np.empty(labels.size, np.int64)
+    m = 0
+    for i in range(labels.size):
+        lab = labels[i]
+        if lab < 0 or not use[lab]:
+            continue
+        x, y = pts[i, 0], pts[i, 1]
+        if always[i] or (x >= lo[0] and x <= hi[0] and y >= lo[1] and y <= hi[1]):
+            out[m] = i
+            m += 1
+    return out[:m].copy()
+
+
+def band_rows(
+    points: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    always: np.ndarray,
+) -> np.ndarray:
+    """Rows (ascending) of the ``points`` (N, 3), metres, whose label (N,) is a surface marked
+    in ``use`` (S,) bool and whose x, y lie in the box [lo, hi] (2,), or that are marked in
+    ``always`` (N,) bool."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    lab = np.ascontiguousarray(labels, dtype=np.int64)
+    if len(lab) != len(pts) or len(always) != len(pts):
+        raise ValueError("points, labels and always must match in length")
+    if len(lab) and lab.max() >= len(use):
+        raise ValueError("a label has no entry in use")
+    box = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    return _band_rows(pts, lab, np.asarray(use, np.bool_), *box, np.asarray(always, np.bool_))
+
+
+@warmer
+def _warm() -> None:
+    starts, counts = np.array([0]), np.array([2])
+    local = [np.array([0.1, 0.9]), np.array([0.1, 0.9]), np.zeros(2)]
+    size, per, use = np.ones(3), np.array([2, 2]), np.array([True])
+    column_sums(starts, counts, local, size, np.array([0, 0]), use, np.ones(2), per)
+    points_in_columns(starts, counts, local, size, np.array([0, 0]), use, np.ones(4, bool), per)
+    band_rows(np.zeros((1, 3)), np.array([0]), use, np.zeros(2), np.ones(2), np.zeros(1, bool))
