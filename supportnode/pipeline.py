@@ -22,6 +22,7 @@ from supportnode.geometry.objects import (
     ObjectResult,
     Segmentation,
     cluster_objects,
+    convex_components,
     describe_objects,
     split_objects,
 )
@@ -139,7 +140,7 @@ def objects_stage(early: Early, params: DetectParams, memo: Memo | None = None) 
     components = early.components
     if early.pending is not None:
         pts, origin = early.pending
-        components = cluster_objects(pts, early.surfaces, params.objects, sensor_origin=origin)
+        components = convex_components(components, pts, early.surfaces, params.objects, origin)
     segmentation = split_objects(components, params.objects, memo)
     result = describe_objects(segmentation, memo)
     early.timings["objects"] = early.timings.get("objects", 0.0) + time.perf_counter() - t

@@ -18,6 +18,7 @@ Modules, by stage:
 
 from supportnode.geometry.objects.detect import (
     cluster_objects,
+    convex_components,
     describe_objects,
     detect_objects,
     segment_objects,
@@ -31,6 +32,7 @@ __all__ = [
     "ObjectResult",
     "Segmentation",
     "cluster_objects",
+    "convex_components",
     "describe_objects",
     "detect_objects",
     "segment_objects",

@@ -251,14 +251,15 @@ def cluster_convex(
     (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
     comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
     voxel = stats.pop("_voxel_of_point", np.zeros(len(cp), np.int64))
-    above, band, sigma = _band(cp, support, surfaces, origin)
-    level, window = _cell_level(cp, comp, voxel, sigma, params)
-    dense = level < len(_CELL_STEPS)
+    level = cell_levels(cp, comp, voxel, params)
+    dense = level < len(CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
+    if not dense.any():
+        return comp  # its labels 0..C-1 are all used
     out = np.where(dense[comp], -1, comp)
     _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
-    if not dense.any():
-        return out
+    above, band, sigma = _band(cp, support, surfaces, origin)
+    window = _windows(comp, level, sigma, params)
     free = dense[comp] & (above > band)
     stats["band_points"] = int((dense[comp] & ~free).sum())
     base = int(out.max()) + 1 if (out >= 0).any() else 0
@@ -272,7 +273,7 @@ def cluster_convex(
         seg = convex_segments(
             cp[at],
             origin,
-            cell=params.convex_cell * _CELL_STEPS[k],
+            cell=params.convex_cell * CELL_STEPS[k],
             normal_cells=w,
             smooth_deg=params.convex_smooth_deg,
             min_points=params.min_points,
@@ -296,63 +297,75 @@ def cluster_convex(
 # _CELL_PER_SPACING times its points' spacing (its surfaces stay connected cell to cell, and
 # a gap a few spacings wide still cuts); sparser components are not segmented. Its normals'
 # window spans at least _WINDOW_SIGMAS noise sigmas (at most _MAX_WINDOW cells each side).
-_CELL_STEPS = (1.0, 1.5)
+CELL_STEPS = (1.0, 1.5)
 _CELL_PER_SPACING = 2.5
 _WINDOW_SIGMAS = 8.0
 _MAX_WINDOW = 5
-# The point spacing over cluster_cell / sqrt(points per occupied voxel) (see _cell_level).
+# The point spacing over cluster_cell / sqrt(points per occupied voxel) (see cell_levels).
 _SPACING_PER_VOXEL = 0.75
 # Groups wider than this in x or y are room structure, not objects (metres).
 _MAX_EXTENT = 1.5
 
 
-def _cell_level(
-    cp: np.ndarray,
-    comp: np.ndarray,
-    voxel: np.ndarray,
-    sigma: np.ndarray,
-    params: ObjectParams,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per component (C,): the index in _CELL_STEPS of its cell size (len(_CELL_STEPS) when
+def cell_levels(
+    cp: np.ndarray, comp: np.ndarray, voxel: np.ndarray, params: ObjectParams
+) -> np.ndarray:
+    """Per component (C,): the index in CELL_STEPS of its cell size; len(CELL_STEPS) when
     even the largest is finer than its points' spacing, when it is smaller than
-    ``params.min_points`` or wider than room structure), and its normal window in cells.
-    voxel: (M,) each point's voxel of the clustering grid (``cluster_cell``); sigma: (M,)
-    each point's noise (its surface's at its range; 0 when unknown), metres.
+    ``params.min_points`` or wider than room structure (not segmented by convexity).
+    cp: (M, 3) points, metres; comp: (M,) their component (-1: none, ignored); voxel: (M,)
+    each point's voxel of the clustering grid (``cluster_cell``).
 
     The spacing comes from the points per occupied voxel (a surface sampled every s metres
     puts about (cluster_cell / s)^2 in one, noise or not: 0.75 of that, measured against
     nearest neighbours on real and simulated depth images)."""
     n = int(comp.max()) + 1 if len(comp) else 0
-    level = np.full(n, len(_CELL_STEPS), np.int64)
-    window = np.full(n, params.convex_normal_cells, np.int64)
+    level = np.full(n, len(CELL_STEPS), np.int64)
     if n == 0:
-        return level, window
-    size = np.bincount(comp, minlength=n)
+        return level
     per_point = np.bincount(voxel)[voxel].astype(np.float64)
+    if (comp < 0).any():
+        ok = comp >= 0
+        cp, comp, per_point = cp[ok], comp[ok], per_point[ok]
+    size = np.bincount(comp, minlength=n)
     per_voxel = np.bincount(comp, per_point, n) / np.maximum(size, 1)
     spacing = _SPACING_PER_VOXEL * params.cluster_cell / np.sqrt(np.maximum(per_voxel, 1e-9))
     need = _CELL_PER_SPACING * spacing / params.convex_cell  # in convex cells
-    big = (size >= params.min_points) & (need <= _CELL_STEPS[-1])
+    big = (size >= params.min_points) & (need <= CELL_STEPS[-1])
     if not big.any():
-        return level, window
+        return level
     order = np.argsort(comp, kind="stable")
-    bounds = np.searchsorted(comp[order], np.arange(n + 1))
+    starts = np.searchsorted(comp[order], np.arange(n))[size > 0]
     # Room structure (a wall, a shelf's frame) is no object to part at its creases.
-    starts = bounds[:-1][size > 0]
     for a in range(2):  # per component at once, a column at a time
         col = cp[:, a][order]
         extent = np.maximum.reduceat(col, starts) - np.minimum.reduceat(col, starts)
         big[size > 0] &= extent <= _MAX_EXTENT
-    noise = np.zeros(n)
-    for k in np.flatnonzero(big):
+    for step_k in reversed(range(len(CELL_STEPS))):
+        level[big & (CELL_STEPS[step_k] >= need)] = step_k
+    return level
+
+
+def _windows(
+    comp: np.ndarray, level: np.ndarray, sigma: np.ndarray, params: ObjectParams
+) -> np.ndarray:
+    """Per component (C,) of :func:`cell_levels`' levels: its normal window in cells, at
+    least ``convex_normal_cells``, spanning _WINDOW_SIGMAS of its median noise. sigma: (M,)
+    each point's noise (its surface's at its range; 0 when unknown), metres."""
+    low = params.convex_normal_cells
+    window = np.full(len(level), low, np.int64)
+    dense = np.flatnonzero(level < len(CELL_STEPS))
+    if len(dense) == 0:
+        return window
+    order = np.argsort(comp, kind="stable")
+    bounds = np.searchsorted(comp[order], np.arange(len(level) + 1))
+    noise = np.zeros(len(level))
+    for k in dense:
         mine = order[bounds[k] : bounds[k + 1]]
         noise[k] = np.median(sigma[mine[:: max(1, len(mine) // 200)]])
-    for step_k in reversed(range(len(_CELL_STEPS))):
-        level[big & (_CELL_STEPS[step_k] >= need)] = step_k
-    step = np.asarray(_CELL_STEPS + (_CELL_STEPS[-1],))[level]
+    step = np.asarray(CELL_STEPS + (CELL_STEPS[-1],))[level]
     wide = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * params.convex_cell * step)).astype(np.int64)
-    low = params.convex_normal_cells
-    return level, np.clip(wide, low, max(low, _MAX_WINDOW))
+    return np.clip(wide, low, max(low, _MAX_WINDOW))
 
 
 def _band(

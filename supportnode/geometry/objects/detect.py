@@ -26,7 +26,7 @@ from supportnode.geometry.objects.clusters import (
     _drop_small,
     _order,
 )
-from supportnode.geometry.objects.convexity import cluster_convex
+from supportnode.geometry.objects.convexity import CELL_STEPS, cell_levels, cluster_convex
 from supportnode.geometry.objects.describe import _describe, _stack
 from supportnode.geometry.objects.feet import claim_feet, claim_raised
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
@@ -38,6 +38,7 @@ from supportnode.params import ObjectParams
 
 __all__ = [
     "cluster_objects",
+    "convex_components",
     "describe_objects",
     "detect_objects",
     "segment_objects",
@@ -116,6 +117,7 @@ def cluster_objects(
         raise InputError(
             f"unknown object method {params.method!r}; expected 'knn', 'voxel' or 'convex'"
         )
+    voxels = stats.pop("_voxel_of_point", None)
     lab = _drop_small(lab, params.min_points)
     claimed = np.zeros(0, np.int64)
     if params.foot_reach > 0 and any(s.band[0] > 0 for s in surfaces.surfaces) and len(lab):
@@ -135,7 +137,31 @@ def cluster_objects(
     seg.labels = _full_labels(len(pts), cand, seg.labels)
     stats["time_cluster_s"] = time.perf_counter() - t0
     seg.stats = {"components": n}
-    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed)
+    if params.method != "voxel" or len(claimed):
+        voxels = None
+    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels)
+
+
+def convex_components(
+    components: Components,
+    points: np.ndarray,
+    surfaces: SurfaceResult,
+    params: ObjectParams,
+    sensor_origin: np.ndarray | None = None,
+) -> Components:
+    """The ``convex`` method's components of the points, given ``components``, the same
+    points' components by the ``voxel`` method (:func:`cluster_objects`, same arguments):
+    those, when none of them is dense enough to be segmented by convexity (a lidar's or a
+    map's points: the convex method keeps them as they are), else :func:`cluster_objects`
+    with ``params`` (method ``convex``)."""
+    vox = components._voxels
+    if vox is None:
+        return cluster_objects(points, surfaces, params, sensor_origin)
+    level = cell_levels(components._points, components._labels, vox, params)
+    if (level < len(CELL_STEPS)).any():
+        return cluster_objects(points, surfaces, params, sensor_origin)
+    stats = dict(components._stats, method="convex", dense_components=0)
+    return dataclasses.replace(components, _stats=stats)
 
 
 # The band points searched for feet lie within this of the objects' x, y box, metres.

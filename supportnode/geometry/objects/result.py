@@ -106,3 +106,5 @@ class Components:
     _stats: dict = field(default_factory=dict, repr=False)
     # Rows the objects took from the surfaces' noise band (their feet): no longer surface.
     claimed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    # (M,) each candidate's voxel of the clustering grid (voxel method, no feet claimed).
+    _voxels: np.ndarray | None = field(default=None, repr=False)

@@ -231,3 +231,45 @@ def test_supported_by_on_the_wire_and_in_result_json():
     msg.clusters[1].supported_by = 42  # no such id in the message
     with pytest.raises(ProtocolError, match="supported_by"):
         decode_any([bytes(f) for f in msg.encode("obstacles")])
+
+
+def _same_components(a, b):
+    np.testing.assert_array_equal(a.segmentation.labels, b.segmentation.labels)
+    np.testing.assert_array_equal(a.segmentation.surface_ids, b.segmentation.surface_ids)
+    assert a._stats["method"] == b._stats["method"] == "convex"
+    assert a._stats["dense_components"] == b._stats["dense_components"]
+
+
+@pytest.mark.parametrize("view", ["lidar", "kinect"])
+def test_convex_components_from_the_voxel_ones_equal_the_convex_method(view):
+    """The pipeline finds the voxel components first (free space needs no more) and the
+    convex ones later: the same components as the convex method straight away, whether the
+    view has groups dense enough to segment (a Kinect's) or not (a lidar's)."""
+    from dataclasses import replace
+
+    from supportnode.geometry.objects import cluster_objects, convex_components
+    from supportnode.geometry.surfaces import detect_surfaces
+    from supportnode.sim import load_scene
+    from supportnode.sim.sensors import Lidar
+    from supportnode.sim.simulate import scans
+    from supportnode.sim.trajectory import poses_for
+
+    params = load_config(None, [])
+    if view == "lidar":
+        scene = load_scene("shelf")
+        scan = scans(scene, Lidar.preset("os128"), poses_for(scene, 1), seed=0)[0]
+        pts, origin = scan.points.astype(float), scan.sensor_pose[:3, 3]
+    else:
+        c = case("box_on_box", seed=0, frame="world")
+        ok = np.isfinite(c.cloud.points[:, 0])
+        pts, origin = c.cloud.points[ok].astype(float), c.cloud.sensor_pose[:3, 3]
+    surfaces = detect_surfaces(pts, params.surfaces, sensor_origin=origin)
+    if view == "kinect":  # no band, so the pipeline would defer: test the recluster path
+        surfaces = replace(
+            surfaces, surfaces=[replace(s, band=(0.0, 0.0)) for s in surfaces.surfaces]
+        )
+    voxel = cluster_objects(pts, surfaces, replace(params.objects, method="voxel"), origin)
+    got = convex_components(voxel, pts, surfaces, params.objects, origin)
+    want = cluster_objects(pts, surfaces, params.objects, origin)
+    _same_components(got, want)
+    assert (want._stats["dense_components"] > 0) == (view == "kinect")
