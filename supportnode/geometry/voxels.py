@@ -6,7 +6,7 @@ the origin and can be merged scan after scan (the node's map does exactly that).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -196,6 +196,15 @@ class VoxelGrid:
     order: np.ndarray
     starts: np.ndarray
     local: list[np.ndarray]
+    _position_voxel: np.ndarray | None = field(default=None, init=False, repr=False)
+
+    def voxel_at(self, positions: np.ndarray) -> np.ndarray:
+        """(K,) int64 voxel of each of the grid-order ``positions`` (K,) (indices into
+        ``order`` and ``local``). A gather from a table built once per grid: the
+        searchsorted over ``starts`` it replaces took ~0.6 ms a call on a depth image."""
+        if self._position_voxel is None:
+            self._position_voxel = np.repeat(np.arange(len(self.counts)), self.counts)
+        return self._position_voxel[positions]
 
     @property
     def corners(self) -> np.ndarray:

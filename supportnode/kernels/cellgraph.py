@@ -119,32 +119,51 @@ def _pairs(
 
 
 @njit(cache=True)
+def _extent(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    finite = True
+    for p in range(pts.shape[0]):
+        for a in range(3):
+            v = pts[p, a]
+            if not np.isfinite(v):
+                finite = False
+            lo[a] = min(lo[a], v)
+            hi[a] = max(hi[a], v)
+    return lo, hi, finite
+
+
+@njit(cache=True)
 def _bin_points(
-    ijk: np.ndarray, rel: np.ndarray, dims: np.ndarray, bits: int
+    pts: np.ndarray, base: np.ndarray, size: float, pad: int, dims: np.ndarray, bits: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     cap = 1 << bits
     shift = 64 - bits
     mask = cap - 1
     tk = np.full(cap, -1, np.int64)
     tv = np.empty(cap, np.int64)
-    m = ijk.shape[0]
+    m = pts.shape[0]
     of_point = np.empty(m, np.int64)
     cells = np.empty((m, 3), np.int64)
     mom = np.zeros((m, MOMENTS))
     n = 0
     for p in range(m):
-        key = (ijk[p, 0] * dims[1] + ijk[p, 1]) * dims[2] + ijk[p, 2]
+        # The same float operations as (pts - base) / size, floored, in numpy.
+        x, y, z = pts[p, 0] - base[0], pts[p, 1] - base[1], pts[p, 2] - base[2]
+        i = int(np.floor(x / size)) + pad
+        j = int(np.floor(y / size)) + pad
+        k = int(np.floor(z / size)) + pad
+        key = (i * dims[1] + j) * dims[2] + k
         pos = _home(key, shift)
         while tk[pos] != -1 and tk[pos] != key:
             pos = (pos + 1) & mask
         if tk[pos] == -1:
             tk[pos] = key
             tv[pos] = n
-            cells[n, 0], cells[n, 1], cells[n, 2] = ijk[p, 0], ijk[p, 1], ijk[p, 2]
+            cells[n, 0], cells[n, 1], cells[n, 2] = i, j, k
             n += 1
         c = tv[pos]
         of_point[p] = c
-        x, y, z = rel[p, 0], rel[p, 1], rel[p, 2]
         mom[c, 0] += 1.0
         mom[c, 1] += x
         mom[c, 2] += y
@@ -158,25 +177,31 @@ def _bin_points(
     return cells[:n].copy(), of_point, mom[:n].copy(), tk, tv
 
 
-def bin_points(rel: np.ndarray, size: float, pad: int) -> tuple[CellGrid, np.ndarray, np.ndarray]:
-    """The occupied ``size`` cells of points ``rel`` (M, 3) float64, metres, all >= 0 (as
-    relative to their least corner): the grid (padded by ``pad`` cells), each point's cell
-    (M,) and each cell's moments (F, 10) (count, x, y, z, xx, yy, zz, xy, xz, yz), in one
-    pass. Cells are numbered in the order their first point comes."""
-    rel = np.ascontiguousarray(rel, dtype=np.float64).reshape(-1, 3)
-    if not np.isfinite(rel).all() or (len(rel) and rel.min() < 0):
-        raise ValueError("points must be finite and relative to their least corner")
+def bin_points(
+    points: np.ndarray, size: float, pad: int
+) -> tuple[CellGrid, np.ndarray, np.ndarray, np.ndarray]:
+    """The occupied ``size`` cells of points (M, 3) float64, metres, in one pass after their
+    extent: the grid (cells counted from the points' least corner ``base`` (3,), padded by
+    ``pad`` cells), each point's cell (M,), each cell's moments (F, 10) (count, x, y, z, xx,
+    yy, zz, xy, xz, yz of the points relative to ``base``), and ``base``. Cells are numbered
+    in the order their first point comes."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if not size > 0:
         raise ValueError(f"cell size must be > 0, got {size}")
-    ijk = np.floor(rel / size).astype(np.int64) + pad
-    dims = (ijk.max(axis=0) if len(ijk) else np.zeros(3, np.int64)) + pad + 1
+    lo, hi, finite = _extent(pts)
+    if not finite:
+        raise ValueError("points must be finite")
+    if len(pts) == 0:
+        lo = hi = np.zeros(3)
+    top = np.floor((hi - lo) / size).astype(np.int64) + pad
+    dims = top + pad + 1
     if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
         raise ValueError(f"grid of {dims.tolist()} cells is too large to pack")
     bits = 4
-    while (1 << bits) < 2 * max(len(rel), 1):
+    while (1 << bits) < 2 * max(len(pts), 1):
         bits += 1
-    cells, of_point, mom, tk, tv = _bin_points(ijk, rel, dims, bits)
-    return CellGrid.from_table(cells, dims, pad, tk, tv, 64 - bits), of_point, mom
+    cells, of_point, mom, tk, tv = _bin_points(pts, lo, float(size), int(pad), dims, bits)
+    return CellGrid.from_table(cells, dims, pad, tk, tv, 64 - bits), of_point, mom, lo
 
 
 class CellGrid:
@@ -246,3 +271,4 @@ def _warm() -> None:
     g.window_sums(np.ones((2, MOMENTS)), 1, np.array([0, 1]), np.array([1]))
     g.adjacent_pairs()
     bin_points(np.array([[0.0, 0, 0], [0.001, 0, 0]]), 0.01, 1)
+    bin_points(np.zeros((0, 3)), 0.01, 1)

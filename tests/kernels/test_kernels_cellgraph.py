@@ -95,9 +95,13 @@ def test_warm_up_is_registered():
 @given(n=st.integers(0, 400), size=st.sampled_from([0.005, 0.02, 0.1]), seed=st.integers(0, 9999))
 def test_bin_points_matches_numpy_grouping(n, size, seed):
     rng = np.random.default_rng(seed)
-    rel = rng.uniform(0.0, 0.2, (n, 3))
-    grid, of_point, mom = bin_points(rel, size, 2)
+    pts = rng.uniform(-0.1, 0.2, (n, 3))
+    grid, of_point, mom, base = bin_points(pts, size, 2)
     assert len(of_point) == n and mom.shape == (len(grid.ijk), 10)
+    if n:
+        np.testing.assert_array_equal(base, pts.min(axis=0))
+        assert (grid.dims > grid.ijk.max(axis=0) + 1).all()  # the pad on the far side too
+    rel = pts - base
     ijk = np.floor(rel / size).astype(np.int64) + 2
     np.testing.assert_array_equal(grid.ijk[of_point], ijk)  # each point in its cell
     assert len(np.unique(grid.ijk, axis=0)) == len(grid.ijk)
@@ -109,3 +113,12 @@ def test_bin_points_matches_numpy_grouping(n, size, seed):
     if len(grid.ijk):
         s = grid.window_sums(np.eye(len(grid.ijk)), 0)
         np.testing.assert_array_equal(s, np.eye(len(grid.ijk)))
+
+
+def test_bin_points_refuses_nan_and_a_bad_size():
+    with pytest.raises(ValueError, match="finite"):
+        bin_points(np.array([[0.0, 0.0, np.nan]]), 0.01, 1)
+    with pytest.raises(ValueError, match="size"):
+        bin_points(np.zeros((2, 3)), 0.0, 1)
+    grid, of_point, mom, _ = bin_points(np.zeros((0, 3)), 0.01, 1)
+    assert len(grid.ijk) == 0 and len(of_point) == 0 and mom.shape == (0, 10)

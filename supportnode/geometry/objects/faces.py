@@ -42,8 +42,7 @@ class Cells:
 
 def make_cells(pts: np.ndarray, size: float, pad: int) -> Cells:
     """The occupied ``size`` cells of (M, 3) points, metres, padded by ``pad`` cells."""
-    base = pts.min(axis=0)
-    grid, of_point, mom = bin_points(pts - base, size, pad)
+    grid, of_point, mom, base = bin_points(pts, size, pad)
     centroid = mom[:, 1:4] / mom[:, :1] + base
     return Cells(of_point, grid, mom, centroid, base, float(size))
 

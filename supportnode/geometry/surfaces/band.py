@@ -190,7 +190,7 @@ def _fit(
     on = np.flatnonzero(labels >= 0)
     # Medians need no more than an even sample (a scan's table holds ~10^5 points).
     on = on[:: max(1, len(on) // _FIT_SAMPLES)]
-    voxel = np.searchsorted(grid.starts, on, side="right") - 1
+    voxel = grid.voxel_at(on)
     r = None if r_voxel is None else r_voxel[voxel]
     return fit_noise(labels[on].astype(np.int64), np.abs(best[on]), r, n)
 
@@ -294,7 +294,7 @@ def refit_planes(
     n_vox = len(grid.counts)
     # Moments per voxel of its labelled points (one compiled pass over runs of the grid's
     # columns, about each voxel's corner), then about the grid's origin (metres).
-    vox = np.searchsorted(grid.starts, at, side="right") - 1
+    vox = grid.voxel_at(at)
     run = np.flatnonzero(np.r_[True, vox[1:] != vox[:-1]])
     v = vox[run]
     loc1, loc2, _, _ = run_moments(grid.local, at, run)
@@ -419,8 +419,15 @@ def band_decides(
     # Each component's median range, from its voxels weighted by their labelled points.
     r_med = np.zeros(n_comp)
     if band.r_voxel is not None:
-        vox = np.searchsorted(grid.starts, at, side="right") - 1
-        key, w = np.unique(comp * len(grid.counts) + vox, return_counts=True)
+        vox = grid.voxel_at(at)
+        flat = comp * len(grid.counts) + vox
+        if n_comp * len(grid.counts) <= 4 * len(flat) + (1 << 16):
+            # The same sorted keys and counts as np.unique, without its sort.
+            w = np.bincount(flat, minlength=n_comp * len(grid.counts))
+            key = np.flatnonzero(w)
+            w = w[key]
+        else:
+            key, w = np.unique(flat, return_counts=True)
         c, r = key // len(grid.counts), band.r_voxel[key % len(grid.counts)]
         order = np.lexsort((r, c))
         cw = np.cumsum(w[order])

@@ -244,7 +244,7 @@ def _object_tops(
     pos = pos[np.isin(sid, ids)]
     step = max(1, len(pos) // _TOP_MAX_POINTS)
     pos = pos[::step]
-    v = np.searchsorted(grid.starts, pos, side="right") - 1
+    v = grid.voxel_at(pos)
     xy = (
         np.stack([grid.local[0][pos], grid.local[1][pos]], axis=1)
         + grid.keys[v, :2] * grid.size[:2]

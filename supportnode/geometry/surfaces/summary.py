@@ -129,7 +129,7 @@ def _runs(
     # Imported here: importing the geometry (as the wire's types do) must not load numba.
     from supportnode.kernels.runs import range_extremes, run_moments
 
-    at_vox = np.searchsorted(grid.starts, at, side="right") - 1
+    at_vox = grid.voxel_at(at)
     first = np.flatnonzero(np.r_[True, at_vox[1:] != at_vox[:-1]])
     vv = at_vox[first]
     n_on = np.diff(np.append(first, len(at)))
