@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from supportnode.geometry.surfaces import detect_surfaces
-from supportnode.geometry.surfaces.band import fit_noise
+from supportnode.geometry.surfaces.noise import fit_noise
 from supportnode.params import SurfaceParams
 from supportnode.sim.tabletop import case
 

@@ -6,6 +6,9 @@ Two methods share one result type:
 - ``planar`` (default): per-voxel plane fits from moments; only flat, near-horizontal voxels grow;
   growth may cross height layers within ``max_step`` (flat objects lying on a surface, raised
   by a step, are cut out again); minimum area and width in metres.
+
+On a depth camera's view (`band`) each surface measures its noise (`noise`: sigma by range)
+and takes the points within its noise band, not within a fixed tolerance.
 """
 
 from supportnode.geometry.surfaces.detect import detect_surfaces
