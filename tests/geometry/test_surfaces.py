@@ -330,6 +330,19 @@ def test_box_top_that_holds_something_stays_a_surface(rng):
     assert sorted(round(s.height, 2) for s in loaded.surfaces) == [0.0, 0.75, 1.05]
 
 
+def test_box_top_with_a_box_on_it_is_no_surface(rng):
+    """A 12 cm box on a table with a smaller box standing on it (a stack, as mOSD labels
+    it): two objects, so neither top is a surface; the loaded-top rule is furniture's."""
+    floor = plane_points(rng, -1.5, 2.5, -1.5, 2.0, 0.0, 60000)
+    table = _without(plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000), 0.4, 0.7, 0.25, 0.55)
+    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
+    lower = box_points(rng, (0.55, 0.4, 0.81), (0.3, 0.3, 0.12), 12000)
+    upper = box_points(rng, (0.55, 0.4, 0.91), (0.15, 0.12, 0.08), 4000)
+    upper = upper[upper[:, 2] > 0.872]  # its bottom face lies on the lower box, hidden
+    res = detect_surfaces(np.vstack([floor, table, legs, lower, upper]))
+    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.75]
+
+
 def _flat_object(rng, shape, centre, height, top, density=25000.0):
     """A thin object lying on a surface at ``top``: a board (0.4 x 0.25 m, turned 10 deg) or
     a plate (radius 0.12 m), ``height`` thick; its top and rim at ``density`` points/m^2.

@@ -180,6 +180,9 @@ _TOP_MAX_POINTS = 20_000
 # nothing rises beyond object_top_max_height, make it a support after all (a cabinet on a desk holding a
 # globe is a place to put things; a bare microwave top is not).
 _TOP_MIN_LOAD = 30
+# ... and only a face at least this high above the surface around it (metres): lower, it is
+# a box's top with a box standing on it, two objects (as mOSD labels a stack), not furniture.
+_TOP_CARRY_MIN_HEIGHT = 0.2
 
 
 def _object_tops(
@@ -266,8 +269,10 @@ def _object_tops(
                 out[i] = True
                 break
     for i in np.flatnonzero(out).tolist():  # a few object tops: do they carry something?
+        rise = min(surfaces[i].height - surfaces[j].height for j in below[i])
         out[i] = (
-            _load(grid, labels, lut, keys[i], voxel_cell, surfaces[i].height, params)
+            rise < _TOP_CARRY_MIN_HEIGHT
+            or _load(grid, labels, lut, keys[i], voxel_cell, surfaces[i].height, params)
             < _TOP_MIN_LOAD
         )
     return out
