@@ -388,4 +388,11 @@ def _band(
         above[at] = pts[at, 2] - s.height
         band[at] = s.band_width(r[at]) if s.band[1] > 0 else _FALLBACK_BAND
         sigma[at] = np.hypot(s.noise[0], s.noise[1] * r[at] ** 2)
+    # The noise is the sensor's: over no surface (a table's edge, a wall's piece), the model
+    # of the surface with most points holds at the point's range, as it does over it.
+    measured = [s for s in surfaces if s.noise[0] > 0 or s.noise[1] > 0]
+    if measured and (support < 0).any():
+        a, b = max(measured, key=lambda s: s.point_count).noise
+        at = np.flatnonzero(support < 0)
+        sigma[at] = np.hypot(a, b * r[at] ** 2)
     return above, band, sigma
