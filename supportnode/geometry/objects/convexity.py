@@ -33,7 +33,7 @@ from supportnode.params import ObjectParams
 _MIN_PER_CELL = 3  # median points per occupied cell
 _MAX_CELL = 0.04  # metres: the cell stops growing here (gaps of a few cm cut)
 _PAD = 3  # cells of padding: windows reach this far
-_LINK_CELLS = 1.5  # adjacent cells link when their centroids are this many cells apart at most
+_LINK_CELLS = 1.25  # adjacent cells link when their centroids are this many cells apart at most
 # Face growth: a flat window has a surface variation below this; neighbouring cells of one
 # face have normals within this angle and lie on each other's plane within this many noise
 # sigmas (at least a third of a cell); a face holds at least this many points.
