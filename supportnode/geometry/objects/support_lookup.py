@@ -26,6 +26,13 @@ _BOTTOM_BAND = 0.02
 _SUPPORT_MIN_FRACTION = 0.5
 # Largest raster (surfaces + 1) x H x W of the one-pass support look-up (32 MB of int32).
 _TABLE_MAX_CELLS = 8_000_000
+# A depth camera's surface (one its noise band labelled) has its footprint's notches up to
+# twice this wide (metres) closed: an object near a table's edge hides the table behind it
+# from the camera, and that shadow, reaching the edge, is a notch, not a hole; the object's
+# far part stands on the table all the same. Footprint rasters above _NOTCH_MAX_CELLS cells
+# are not closed.
+_NOTCH = 0.15
+_NOTCH_MAX_CELLS = 250_000
 
 
 def _support_below(
@@ -158,6 +165,8 @@ class _SupportLookup:
         rel = cells - self.origin
         mask = np.zeros(tuple(rel.max(axis=0) + 2), dtype=bool)
         mask[rel[:, 0], rel[:, 1]] = True
+        if surface.band[0] > 0:  # one depth camera's view: the shadows are its
+            mask = _close_notches(mask, self.cell)
         mask = _fill_holes(mask)
         if dilate:
             mask = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool))
@@ -182,6 +191,21 @@ class _SupportLookup:
         res = np.zeros(len(i), dtype=bool)
         res[inside] = self.mask[i[inside], j[inside]]
         return res
+
+
+def _close_notches(mask: np.ndarray, cell: np.ndarray) -> np.ndarray:
+    """The footprint raster ``mask`` (cells ``cell`` (2,) m) closed by a disc of radius
+    _NOTCH (the raster grows by that much each side, then shrinks back: nothing beyond the
+    footprint's outline is added, only notches narrower than twice the radius are filled)."""
+    r = np.ceil(_NOTCH / cell).astype(np.int64)
+    if mask.size > _NOTCH_MAX_CELLS or (r <= 0).any():
+        return mask
+    ii, jj = np.mgrid[-r[0] : r[0] + 1, -r[1] : r[1] + 1]
+    disc = (ii / r[0]) ** 2 + (jj / r[1]) ** 2 <= 1.0
+    pad = np.zeros((mask.shape[0] + 2 * r[0], mask.shape[1] + 2 * r[1]), dtype=bool)
+    pad[r[0] : -r[0], r[1] : -r[1]] = mask
+    closed = ndimage.binary_closing(pad, structure=disc)
+    return mask | closed[r[0] : -r[0], r[1] : -r[1]]
 
 
 def _supports(groups: list[np.ndarray], lookups: list[_SupportLookup], tol: float) -> np.ndarray:
