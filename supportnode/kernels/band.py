@@ -22,8 +22,8 @@ def _column_sums(
     ly: np.ndarray,
     labels: np.ndarray,
     use: np.ndarray,
-    value: np.ndarray,
     col: np.ndarray,
+    value: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     per0, per1 = col[0], col[1]
     n_keys = starts.size * per0 * per1
@@ -44,6 +44,36 @@ def _column_sums(
     return n, total, comp
 
 
+_GridArgs = tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
+]
+
+
+def _grid_args(
+    starts: np.ndarray,
+    counts: np.ndarray,
+    local: list[np.ndarray],
+    size: np.ndarray,
+    labels: np.ndarray,
+    use: np.ndarray,
+    per: np.ndarray,
+) -> _GridArgs:
+    """The column kernels' common arguments, checked and made contiguous."""
+    starts = np.ascontiguousarray(starts, dtype=np.int64)
+    counts = np.ascontiguousarray(counts, dtype=np.int64)
+    lab = np.ascontiguousarray(labels, dtype=np.int64)
+    if len(starts) != len(counts):
+        raise ValueError("starts and counts must match in length")
+    if len(starts) and (starts + counts).max() > len(lab):
+        raise ValueError("a voxel's points lie outside the points")
+    if len(lab) and lab.max() >= len(use):
+        raise ValueError("a label has no entry in use")
+    lx = np.ascontiguousarray(local[0], dtype=np.float64) / float(size[0])
+    ly = np.ascontiguousarray(local[1], dtype=np.float64) / float(size[1])
+    col = np.ascontiguousarray(per, dtype=np.int64)
+    return starts, counts, lx, ly, lab, np.asarray(use, np.bool_), col
+
+
 def column_sums(
     starts: np.ndarray,
     counts: np.ndarray,
@@ -60,20 +90,10 @@ def column_sums(
     surface (V,) (the last such label; -1 for none). Voxel v's points are
     ``starts[v] : starts[v] + counts[v]``; ``local``: their x, y, z in the voxel, metres.
     Column keys are ``(v * per0 + i) * per1 + j``."""
-    starts = np.ascontiguousarray(starts, dtype=np.int64)
-    counts = np.ascontiguousarray(counts, dtype=np.int64)
-    lab = np.ascontiguousarray(labels, dtype=np.int64)
     val = np.ascontiguousarray(value, dtype=np.float64)
-    if len(lab) != len(val) or len(starts) != len(counts):
-        raise ValueError("labels and values, starts and counts must match in length")
-    if len(starts) and (starts + counts).max() > len(lab):
-        raise ValueError("a voxel's points lie outside the points")
-    if len(lab) and lab.max() >= len(use):
-        raise ValueError("a label has no entry in use")
-    col = np.ascontiguousarray(per, dtype=np.int64)
-    lx = np.ascontiguousarray(local[0], dtype=np.float64) / float(size[0])
-    ly = np.ascontiguousarray(local[1], dtype=np.float64) / float(size[1])
-    return _column_sums(starts, counts, lx, ly, lab, np.asarray(use, np.bool_), val, col)
+    if len(labels) != len(val):
+        raise ValueError("labels and values must match in length")
+    return _column_sums(*_grid_args(starts, counts, local, size, labels, use, per), val)
 
 
 @njit(cache=True)
@@ -84,8 +104,8 @@ def _in_columns(
     ly: np.ndarray,
     labels: np.ndarray,
     use: np.ndarray,
-    flagged: np.ndarray,
     col: np.ndarray,
+    flagged: np.ndarray,
 ) -> np.ndarray:
     per0, per1 = col[0], col[1]
     out = np.empty(lx.size, np.int64)
@@ -115,18 +135,10 @@ def points_in_columns(
 ) -> np.ndarray:
     """The positions (grid order, ascending) of the points counted by :func:`column_sums`
     (same arguments) that lie in a column ``flagged`` (V * per0 * per1,) bool."""
-    starts = np.ascontiguousarray(starts, dtype=np.int64)
-    counts = np.ascontiguousarray(counts, dtype=np.int64)
-    lab = np.ascontiguousarray(labels, dtype=np.int64)
-    col = np.ascontiguousarray(per, dtype=np.int64)
-    if len(flagged) != len(starts) * int(col[0]) * int(col[1]):
+    if len(flagged) != len(starts) * int(per[0]) * int(per[1]):
         raise ValueError("flagged must have one entry per column")
-    if len(starts) and (starts + counts).max() > len(lab):
-        raise ValueError("a voxel's points lie outside the points")
-    lx = np.ascontiguousarray(local[0], dtype=np.float64) / float(size[0])
-    ly = np.ascontiguousarray(local[1], dtype=np.float64) / float(size[1])
-    use_b, flag_b = np.asarray(use, np.bool_), np.asarray(flagged, np.bool_)
-    return _in_columns(starts, counts, lx, ly, lab, use_b, flag_b, col)
+    args = _grid_args(starts, counts, local, size, labels, use, per)
+    return _in_columns(*args, np.asarray(flagged, np.bool_))
 
 
 @njit(cache=True)

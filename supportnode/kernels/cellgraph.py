@@ -19,8 +19,9 @@ from supportnode.kernels.runtime import warmer
 GOLDEN = 0x9E3779B97F4A7C15
 MOMENTS = 10  # count, x, y, z, xx, yy, zz, xy, xz, yz
 
-# The 13 forward offsets of the 26-neighbourhood: each adjacent pair once.
-_FORWARD = np.array(
+# The 13 forward offsets of the 26-neighbourhood (dx, dy, dz) > (0, 0, 0): each adjacent
+# pair once (shared with the objects' voxel linking, `geometry.objects.neighbours`).
+FORWARD_26 = np.array(
     [
         (dx, dy, dz)
         for dx in (-1, 0, 1)
@@ -261,7 +262,7 @@ class CellGrid:
         """Pairs (src, dst) of 26-adjacent cells, each pair once: two (E,) int64."""
         if self.pad < 1:
             raise ValueError("adjacent pairs need a padding of at least one cell")
-        return _pairs(self.ijk, self.dims, self._tk, self._tv, self._shift, _FORWARD)
+        return _pairs(self.ijk, self.dims, self._tk, self._tv, self._shift, FORWARD_26)
 
 
 @warmer
