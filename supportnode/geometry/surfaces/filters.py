@@ -3,6 +3,8 @@ surface as a whole (size, tilt, seen from above, not an object's top)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy import ndimage
 
@@ -200,10 +202,32 @@ def _object_tops(
     board differs in one of these: it is large, or high, or the floor or board below it
     shows under it. One loop iteration per pair of surfaces (a few), vectorised inside."""
     out = np.zeros(len(surfaces), dtype=bool)
-    max_area, max_height = params.object_top_max_area, params.object_top_max_height
+    max_area = params.object_top_max_area
     small = [i for i, s in enumerate(surfaces) if s.area < max_area]
     if max_area <= 0 or len(surfaces) < 2 or not small:
         return out
+    lin, keys, below = _candidates_below(surfaces, small, params)
+    if not below:
+        return out
+    voxel_cell = lin(grid.keys[:, :2])  # each voxel's column, for _hidden and _load
+    out[list(_hidden(grid, labels, lut, surfaces, keys, below, voxel_cell))] = True
+    for i in np.flatnonzero(out).tolist():  # a few object tops: do they carry something?
+        rise = min(surfaces[i].height - surfaces[j].height for j in below[i])
+        out[i] = (
+            rise < _TOP_CARRY_MIN_HEIGHT
+            or _load(grid, labels, lut, keys[i], voxel_cell, surfaces[i].height, params)
+            < _TOP_MIN_LOAD
+        )
+    return out
+
+
+def _candidates_below(
+    surfaces: list[Surface], small: list[int], params: SurfaceParams
+) -> tuple[Callable[[np.ndarray], np.ndarray], list[np.ndarray], dict[int, list[int]]]:
+    """For :func:`_object_tops`: the cells' linear key function, each surface's cell keys,
+    and for each small face the surfaces lying around it, a little lower, not plainly seen
+    under it (faces with none left out)."""
+    max_height = params.object_top_max_height
     cells = np.concatenate([s.cells for s in surfaces])
     lo = cells.min(axis=0) - 1
     span = int(cells[:, 1].max() - lo[1]) + 2
@@ -214,12 +238,12 @@ def _object_tops(
     keys = [lin(s.cells) for s in surfaces]  # distinct cells already
     ring8 = np.array([span * dx + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy])
     edge4 = np.array([span, -span, 1, -1])
-    below = {}  # small face -> the surfaces lying around it, a little lower, not plainly seen
+    below = {}
     for i in small:
         s = surfaces[i]
         ring = np.setdiff1d(keys[i][:, None] + ring8, keys[i])
         inner = keys[i][np.isin(keys[i][:, None] + edge4, keys[i]).all(axis=1)]
-        below[i] = [
+        under = [
             j
             for j, t in enumerate(surfaces)
             if params.max_step < s.height - t.height <= max_height
@@ -228,10 +252,22 @@ def _object_tops(
             # a surface in most of the inner cells is plainly seen under the face.
             and not (len(inner) and np.isin(inner, keys[j]).mean() >= 0.5)
         ]
-        if not below[i]:
-            del below[i]  # nothing around it to stand on, or plainly seen under it
-    if not below:
-        return out
+        if under:
+            below[i] = under
+    return lin, keys, below
+
+
+def _hidden(
+    grid: VoxelGrid,
+    labels: np.ndarray,
+    lut: np.ndarray,
+    surfaces: list[Surface],
+    keys: list[np.ndarray],
+    below: dict[int, list[int]],
+    voxel_cell: np.ndarray,
+) -> list[int]:
+    """The faces of ``below`` under whose inner footprint a surface around them shows at
+    most _TOP_MAX_SEEN of its usual density (a solid box hides what it stands on)."""
     # Points of these faces and of the surfaces around them, in the faces' columns: xy and
     # surface id, thinned to a bounded number (the test compares densities).
     ids = np.array(
@@ -239,7 +275,6 @@ def _object_tops(
             {surfaces[i].id for i in below} | {surfaces[j].id for b in below.values() for j in b}
         )
     )
-    voxel_cell = lin(grid.keys[:, :2])  # each voxel's column, for this and _load
     vox = np.flatnonzero(np.isin(voxel_cell, np.concatenate([keys[i] for i in below])))
     n_pts = grid.counts[vox]
     pos = np.repeat(grid.starts[vox] - (np.cumsum(n_pts) - n_pts), n_pts) + np.arange(n_pts.sum())
@@ -253,28 +288,21 @@ def _object_tops(
         + grid.keys[v, :2] * grid.size[:2]
     )
     sid = lut[labels[pos]]
+    out = []
     for i, under in below.items():
         s = surfaces[i]
         found, (origin, cell) = _inner_footprint(xy[sid == s.id], s.area)
         if found is None:
             continue  # too small to tell what lies under it: keep
-        inner = found
         for j in under:
             t = surfaces[j]
             f = np.floor((xy[sid == t.id] - origin) / cell).astype(np.int64)
-            ok = np.all((f >= 0) & (f < inner.shape[::-1]), axis=1)
-            seen = int(inner[f[ok, 1], f[ok, 0]].sum())
-            expected = t.point_count / step / max(t.area, 1e-9) * inner.sum() * cell**2
+            ok = np.all((f >= 0) & (f < found.shape[::-1]), axis=1)
+            seen = int(found[f[ok, 1], f[ok, 0]].sum())
+            expected = t.point_count / step / max(t.area, 1e-9) * found.sum() * cell**2
             if seen <= _TOP_MAX_SEEN * expected:
-                out[i] = True
+                out.append(i)
                 break
-    for i in np.flatnonzero(out).tolist():  # a few object tops: do they carry something?
-        rise = min(surfaces[i].height - surfaces[j].height for j in below[i])
-        out[i] = (
-            rise < _TOP_CARRY_MIN_HEIGHT
-            or _load(grid, labels, lut, keys[i], voxel_cell, surfaces[i].height, params)
-            < _TOP_MIN_LOAD
-        )
     return out
 
 
