@@ -68,7 +68,7 @@ DETECTION_PROBES: dict[str, tuple[str, str, tuple[str, ...], bool]] = {
     # The convex method's faces and the noise band act on a depth camera's dense view.
     "objects.convex_cell": ("cluttered_table@kinect", "0.02", (), False),
     "objects.convex_normal_cells": ("cluttered_table@kinect", "4", (), False),
-    "objects.convex_smooth_deg": ("cluttered_table@kinect", "75.0", (), False),
+    "objects.convex_smooth_deg": ("cluttered_table@kinect", "89.0", (), False),
     "objects.foot_reach": ("cluttered_table@kinect", "0.0", (), False),
     "surfaces.band_sigmas": ("cluttered_table@kinect", "0.0", (), False),
     "surfaces.band_min": ("cluttered_table@kinect", "0.008", (), False),
