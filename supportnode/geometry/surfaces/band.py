@@ -211,32 +211,7 @@ def refit_planes(
     at = np.flatnonzero(labels >= 0)
     if len(sv) == 0 or len(at) == 0:
         return
-    from supportnode.kernels.runs import run_moments
-
-    n_vox = len(grid.counts)
-    # Moments per voxel of its labelled points (one compiled pass over runs of the grid's
-    # columns, about each voxel's corner), then about the grid's origin (metres).
-    vox = grid.voxel_at(at)
-    run = np.flatnonzero(np.r_[True, vox[1:] != vox[:-1]])
-    v = vox[run]
-    loc1, loc2, _, _ = run_moments(grid.local, at, run)
-    n = np.diff(np.r_[run, len(at)]).astype(np.float64)
-    corner = grid.keys[v] * grid.size
-    count = np.zeros(n_vox)
-    count[v] = n
-    s1 = [np.zeros(n_vox) for _ in range(3)]
-    for a in range(3):
-        s1[a][v] = loc1[:, a] + n * corner[:, a]
-    s2 = [np.zeros(n_vox) for _ in range(6)]
-    for q, (a, b) in enumerate(OUTER_INDEX):
-        s2[q][v] = (
-            loc2[:, q]
-            + corner[:, a] * loc1[:, b]
-            + corner[:, b] * loc1[:, a]
-            + n * corner[:, a] * corner[:, b]
-        )
-    lab_of_voxel = np.full(n_vox, -1, np.int64)
-    lab_of_voxel[vox] = labels[at]
+    count, s1, s2, lab_of_voxel = _labelled_moments(grid, labels, at)
     own = surface_of_voxel[sv]
     c = np.zeros(len(sv))
     t1 = [np.zeros(len(sv)) for _ in range(3)]
@@ -261,6 +236,41 @@ def refit_planes(
     new_mean, new_normal = np.stack(mean, axis=1)[level], normal[level]
     planes.mean[to] = new_mean
     planes.normal[to] = new_normal
+
+
+def _labelled_moments(
+    grid: VoxelGrid, labels: np.ndarray, at: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Per voxel (V,): the count, the sums (3 columns) and the sums of products (6, in
+    ``OUTER_INDEX`` order) of its labelled points ``at`` (grid order) about the grid's
+    origin, metres; and the surface label of its labelled points (-1: none)."""
+    from supportnode.kernels.runs import run_moments
+
+    n_vox = len(grid.counts)
+    # One compiled pass over runs of the grid's columns, about each voxel's corner, then
+    # shifted to the grid's origin.
+    vox = grid.voxel_at(at)
+    run = np.flatnonzero(np.r_[True, vox[1:] != vox[:-1]])
+    v = vox[run]
+    loc1, loc2, _, _ = run_moments(grid.local, at, run)
+    n = np.diff(np.r_[run, len(at)]).astype(np.float64)
+    corner = grid.keys[v] * grid.size
+    count = np.zeros(n_vox)
+    count[v] = n
+    s1 = [np.zeros(n_vox) for _ in range(3)]
+    for a in range(3):
+        s1[a][v] = loc1[:, a] + n * corner[:, a]
+    s2 = [np.zeros(n_vox) for _ in range(6)]
+    for q, (a, b) in enumerate(OUTER_INDEX):
+        s2[q][v] = (
+            loc2[:, q]
+            + corner[:, a] * loc1[:, b]
+            + corner[:, b] * loc1[:, a]
+            + n * corner[:, a] * corner[:, b]
+        )
+    lab_of_voxel = np.full(n_vox, -1, np.int64)
+    lab_of_voxel[vox] = labels[at]
+    return count, s1, s2, lab_of_voxel
 
 
 def drop_raised(

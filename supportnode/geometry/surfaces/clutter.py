@@ -34,76 +34,18 @@ def _absorb_clutter(
         return np.zeros(0, dtype=np.int64)
     offsets = layered_offsets(8)
     offsets = np.concatenate([offsets, -offsets])
-    min_spread = 0.25 * np.asarray(params.plane_voxel[:2])
     frontier = np.flatnonzero(surface_of_voxel >= 0)
     added = []
     for _ in range(steps):  # a few rings of voxels, each step vectorised
-        j = index.neighbours_many(frontier, offsets, grid.keys)
-        ok = j >= 0
-        src, dst = np.broadcast_to(frontier, j.shape)[ok], j[ok]
-        free = (surface_of_voxel[dst] < 0) & (grid.counts[dst] > params.p_min)
-        src, dst = src[free], dst[free]
+        src, dst = _trials(grid, index, surface_of_voxel, frontier, offsets, params.p_min)
         if len(src) == 0:
             break
-        # One trial per (voxel, surface): neighbours on one surface share its plane.
-        pair = dst * (int(surface_of_voxel.max()) + 1) + surface_of_voxel[src]
-        _, first_of_pair = np.unique(pair, return_index=True)
-        src, dst = src[first_of_pair], dst[first_of_pair]
-        # Every point of each candidate voxel against the plane of the surface voxel beside it,
-        # read from the grid's contiguous corner-relative columns (1-D gathers of runs).
-        n_pts = grid.counts[dst]
-        first = np.cumsum(n_pts) - n_pts
-        rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
-        pos = np.repeat(grid.starts[dst], n_pts) + rank
-        # The plane's point relative to the candidate voxel's corner, then per point.
-        rel = planes.mean[src] - grid.keys[dst] * grid.size
-        nrm = planes.normal[src]
-        # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
-        off = [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)]
-        dist = np.abs(
-            off[0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
-            + off[1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
-            + off[2]
-        )
-        inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
-        n_in = np.add.reduceat(inlier.astype(np.int64), first)
-        # The spread and level tests only for the trials with inliers enough (a few in ten).
-        sel = np.flatnonzero((n_in > params.p_min) & (n_in >= params.absorb_min_fraction * n_pts))
-        if len(sel) == 0:
-            break
-        n_sel = n_pts[sel]
-        first_sel = np.cumsum(n_sel) - n_sel
-        at = np.repeat(first[sel] - first_sel, n_sel) + np.arange(n_sel.sum())
-        off = [o[at] for o in off]
-        inlier = inlier[at]
-        lo = np.stack(
-            [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first_sel) for a in range(2)],
-            axis=1,
-        )
-        hi = np.stack(
-            [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first_sel) for a in range(2)],
-            axis=1,
-        )
-        # The inliers must themselves be a level patch: a ramp crosses a level plane in a
-        # band that would otherwise pass, voxel after voxel along its contour.
-        w = inlier.astype(np.float64)
-        cnt = np.maximum(n_in[sel], 1)
-        mean_in = [np.add.reduceat(off[a] * w, first_sel) / cnt for a in range(3)]
-        # The inliers' covariance entries as columns, in OUTER_INDEX order.
-        _, n_in_plane = sym3_eigen_entries(
-            *(
-                np.add.reduceat(off[a] * off[b] * w, first_sel) / cnt - mean_in[a] * mean_in[b]
-                for a, b in OUTER_INDEX
-            )
-        )
-        level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
-        good = np.zeros(len(dst), dtype=bool)
-        good[sel] = np.all(hi - lo >= min_spread, axis=1) & level
+        good = _fits(grid, surface_of_voxel, planes, tolerance, src, dst, params)
         if not good.any():
             break
         # One surface per voxel: the neighbour explaining most of its points.
         cand = np.flatnonzero(good)
-        order = np.lexsort((-n_in[cand], dst[cand]))
+        order = np.lexsort((-good[cand], dst[cand]))
         cand = cand[order]
         keep = np.r_[True, dst[cand][1:] != dst[cand][:-1]]
         cand = cand[keep]
@@ -116,6 +58,103 @@ def _absorb_clutter(
         frontier = j
     return np.concatenate(added) if added else np.zeros(0, dtype=np.int64)
 
+
+def _trials(
+    grid: VoxelGrid,
+    index: KeyIndex,
+    surface_of_voxel: np.ndarray,
+    frontier: np.ndarray,
+    offsets: np.ndarray,
+    p_min: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(src, dst): the surface voxels of ``frontier`` and the free voxels beside them (more
+    than ``p_min`` points, on no surface) to try on their planes, one per (voxel, surface)."""
+    j = index.neighbours_many(frontier, offsets, grid.keys)
+    ok = j >= 0
+    src, dst = np.broadcast_to(frontier, j.shape)[ok], j[ok]
+    free = (surface_of_voxel[dst] < 0) & (grid.counts[dst] > p_min)
+    src, dst = src[free], dst[free]
+    # One trial per (voxel, surface): neighbours on one surface share its plane.
+    pair = dst * (int(surface_of_voxel.max()) + 1) + surface_of_voxel[src]
+    _, first_of_pair = np.unique(pair, return_index=True)
+    return src[first_of_pair], dst[first_of_pair]
+
+
+def _fits(
+    grid: VoxelGrid,
+    surface_of_voxel: np.ndarray,
+    planes: _Planes,
+    tolerance: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    params: SurfaceParams,
+) -> np.ndarray:
+    """(T,) int: for each trial, its inliers on the plane of ``src`` when they are enough, spread
+    over the cell and level (0 for a failed trial): every point of each candidate voxel
+    ``dst`` against the plane beside it, read from the grid's contiguous corner-relative
+    columns (1-D gathers of runs)."""
+    n_pts = grid.counts[dst]
+    first = np.cumsum(n_pts) - n_pts
+    rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
+    pos = np.repeat(grid.starts[dst], n_pts) + rank
+    # The plane's point relative to the candidate voxel's corner, then per point.
+    rel = planes.mean[src] - grid.keys[dst] * grid.size
+    nrm = planes.normal[src]
+    # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
+    off = [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)]
+    dist = np.abs(
+        off[0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
+        + off[1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
+        + off[2]
+    )
+    inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
+    n_in = np.add.reduceat(inlier.astype(np.int64), first)
+    out = np.zeros(len(dst), dtype=np.int64)
+    # The spread and level tests only for the trials with inliers enough (a few in ten).
+    sel = np.flatnonzero((n_in > params.p_min) & (n_in >= params.absorb_min_fraction * n_pts))
+    if len(sel) == 0:
+        return out
+    n_sel = n_pts[sel]
+    first_sel = np.cumsum(n_sel) - n_sel
+    at = np.repeat(first[sel] - first_sel, n_sel) + np.arange(n_sel.sum())
+    off = [o[at] for o in off]
+    spread, level = _spread_level(off, inlier[at], first_sel, n_in[sel], params)
+    out[sel] = np.where(spread & level, n_in[sel], 0)
+    return out
+
+
+def _spread_level(
+    off: list[np.ndarray],
+    inlier: np.ndarray,
+    first: np.ndarray,
+    n_in: np.ndarray,
+    params: SurfaceParams,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per trial (runs starting at ``first`` of the points' offsets ``off``, three columns):
+    whether its inliers spread over a quarter of the cell in x and y, and whether they are
+    themselves a level patch (a ramp crosses a level plane in a band that would otherwise
+    pass, voxel after voxel along its contour)."""
+    min_spread = 0.25 * np.asarray(params.plane_voxel[:2])
+    lo = np.stack(
+        [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first) for a in range(2)],
+        axis=1,
+    )
+    hi = np.stack(
+        [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first) for a in range(2)],
+        axis=1,
+    )
+    w = inlier.astype(np.float64)
+    cnt = np.maximum(n_in, 1)
+    mean_in = [np.add.reduceat(off[a] * w, first) / cnt for a in range(3)]
+    # The inliers' covariance entries as columns, in OUTER_INDEX order.
+    _, n_in_plane = sym3_eigen_entries(
+        *(
+            np.add.reduceat(off[a] * off[b] * w, first) / cnt - mean_in[a] * mean_in[b]
+            for a, b in OUTER_INDEX
+        )
+    )
+    level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
+    return np.all(hi - lo >= min_spread, axis=1), level
 
 def _voxels_to_vet(
     grid: VoxelGrid,
