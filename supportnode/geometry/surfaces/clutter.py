@@ -156,6 +156,7 @@ def _spread_level(
     level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
     return np.all(hi - lo >= min_spread, axis=1), level
 
+
 def _voxels_to_vet(
     grid: VoxelGrid,
     sorted_labels: np.ndarray,

@@ -50,21 +50,8 @@ def _drop_raised_plateaus(
     comp = surface_of_voxel[sv]
     keep = comp[src] >= 0  # pairs of a surface that is kept (both ends: one surface)
     src, dst = src[keep], dst[keep]
-    # Each voxel's plane as its height h at the cell centre and its slopes (sx, sy).
-    nrm, mean = planes.normal[sv], planes.mean[sv]
-    sx, sy = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
-    kx, ky = grid.keys[sv, 0], grid.keys[sv, 1]
-    vx, vy = float(grid.size[0]), float(grid.size[1])
-    h = mean[:, 2] + sx * ((kx + 0.5) * vx - mean[:, 0]) + sy * ((ky + 0.5) * vy - mean[:, 1])
-    dx, dy = (kx[dst] - kx[src]) * vx, (ky[dst] - ky[src]) * vy
-    dh = h[dst] - h[src]
-    miss_dst = sx[src] * dx + sy[src] * dy - dh  # src's plane at dst's centre, minus dst's
-    miss_src = dh - sx[dst] * dx - sy[dst] * dy  # dst's plane at src's centre, minus src's
     step = np.maximum(params.plateau_min_step, tolerance)
-    step_e = step[comp[src]]
-    # A level neighbour of a step's voxel sees the step (dh) although the plane fitted across
-    # the step, tilted, continues into both sides.
-    cut = (np.abs(miss_dst) > step_e) | (np.abs(miss_src) > step_e) | (np.abs(dh) > step_e)
+    cut, rise_pair = _steps(grid, planes, sv, src, dst, step[comp[src]])
     if not cut.any():
         return 0
     piece = _components(len(sv), src[~cut], dst[~cut])
@@ -78,13 +65,62 @@ def _drop_raised_plateaus(
     main = np.zeros(n_pieces, dtype=bool)
     main[order[first]] = True
     main &= of_piece >= 0
-    # Rise of each piece across its cuts: the mean of both planes' misses, seen from it.
+    # Rise of each piece across its cuts, seen from it (median over its cuts).
     cs, cd = src[cut], dst[cut]
-    rise = 0.5 * (miss_dst[cut] - miss_src[cut])  # of src's piece over dst's
-    rise = _median_by_group(np.r_[rise, -rise], np.r_[piece[cs], piece[cd]], n_pieces)
+    rise = _median_by_group(np.r_[rise_pair, -rise_pair], np.r_[piece[cs], piece[cd]], n_pieces)
     cand = ~main & (of_piece >= 0) & (rise >= 0.5 * step[np.maximum(of_piece, 0)])
     if not cand.any():
         return 0
+    drop = cand & _surrounded(grid, sv, comp, piece, of_piece, main, cand, params)
+    if not drop.any():
+        return 0
+    gone = drop[piece]
+    _level_edges(planes, sv, src, dst, cut, gone)
+    surface_of_voxel[sv[gone]] = -1
+    return int(gone.sum())
+
+
+def _steps(
+    grid: VoxelGrid,
+    planes: _Planes,
+    sv: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    step: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per joined pair (src, dst into ``sv``): whether a step (``step`` (E,) metres) cuts it,
+    and how far src's side rises over dst's (the mean of both planes' misses), metres."""
+    # Each voxel's plane as its height h at the cell centre and its slopes (sx, sy).
+    nrm, mean = planes.normal[sv], planes.mean[sv]
+    sx, sy = -nrm[:, 0] / nrm[:, 2], -nrm[:, 1] / nrm[:, 2]
+    kx, ky = grid.keys[sv, 0], grid.keys[sv, 1]
+    vx, vy = float(grid.size[0]), float(grid.size[1])
+    h = mean[:, 2] + sx * ((kx + 0.5) * vx - mean[:, 0]) + sy * ((ky + 0.5) * vy - mean[:, 1])
+    dx, dy = (kx[dst] - kx[src]) * vx, (ky[dst] - ky[src]) * vy
+    dh = h[dst] - h[src]
+    miss_dst = sx[src] * dx + sy[src] * dy - dh  # src's plane at dst's centre, minus dst's
+    miss_src = dh - sx[dst] * dx - sy[dst] * dy  # dst's plane at src's centre, minus src's
+    # A level neighbour of a step's voxel sees the step (dh) although the plane fitted across
+    # the step, tilted, continues into both sides.
+    cut = (np.abs(miss_dst) > step) | (np.abs(miss_src) > step) | (np.abs(dh) > step)
+    return cut, 0.5 * (miss_dst[cut] - miss_src[cut])
+
+
+def _surrounded(
+    grid: VoxelGrid,
+    sv: np.ndarray,
+    comp: np.ndarray,
+    piece: np.ndarray,
+    of_piece: np.ndarray,
+    main: np.ndarray,
+    cand: np.ndarray,
+    params: SurfaceParams,
+) -> np.ndarray:
+    """(pieces,) bool: the candidate pieces that are small (``plateau_max_area``) and ringed
+    by their surface's main piece (``_PLATEAU_MIN_AROUND`` of the cells around them)."""
+    n_pieces = len(of_piece)
+    kx, ky = grid.keys[sv, 0], grid.keys[sv, 1]
+    vx, vy = float(grid.size[0]), float(grid.size[1])
     # Footprint cells (linear keys on a padded grid) of the candidates and of the main pieces;
     # the share of the cells around a candidate that its surface's main piece covers.
     lo_x, lo_y = int(kx.min()) - 1, int(ky.min()) - 1
@@ -107,14 +143,22 @@ def _drop_raised_plateaus(
     share = np.bincount(r_piece, weights=around, minlength=n_pieces) / np.maximum(
         np.bincount(r_piece, minlength=n_pieces), 1
     )
-    drop = cand & small & (share >= _PLATEAU_MIN_AROUND)
-    if not drop.any():
-        return 0
-    gone = drop[piece]
-    # A voxel across a plateau's edge holds surface and the plateau's rim: its plane, tilted,
-    # meets the plateau's top. It takes the plane of its most level neighbour when that is
-    # more level (as absorbed clutter carries a plane over), so that its surface points stay
-    # on and the plateau's are left off.
+    return small & (share >= _PLATEAU_MIN_AROUND)
+
+
+def _level_edges(
+    planes: _Planes,
+    sv: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    cut: np.ndarray,
+    gone: np.ndarray,
+) -> None:
+    """A voxel across a plateau's edge holds surface and the plateau's rim: its plane, tilted,
+    meets the plateau's top. It takes, in place, the plane of its most level neighbour when
+    that is more level (as absorbed clutter carries a plane over), so that its surface points
+    stay on and the plateau's are left off."""
+    nrm = planes.normal[sv]
     a, b = np.r_[src[cut], dst[cut]], np.r_[dst[cut], src[cut]]
     edge = np.zeros(len(sv), dtype=bool)
     edge[a[gone[b] & ~gone[a]]] = True
@@ -128,8 +172,6 @@ def _drop_raised_plateaus(
         to, by = sv[a[first]], sv[b[first]]
         planes.mean[to] = planes.mean[by]
         planes.normal[to] = planes.normal[by]
-    surface_of_voxel[sv[gone]] = -1
-    return int(gone.sum())
 
 
 def _drop_unfit(
