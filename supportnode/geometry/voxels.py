@@ -237,7 +237,11 @@ class VoxelGrid:
 
 
 def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) -> VoxelGrid:
-    """Group (N, 3) points into voxels of ``size`` (3,) metres and accumulate moments."""
+    """Group (N, 3) points into voxels of ``size`` (3,) metres and accumulate moments.
+
+    One function of ~80 lines on purpose: its (N,) buffers are dropped (``del``) or reused
+    the moment they are spent, and its time follows its peak memory (fresh pages fault);
+    split into steps, each buffer would live until its step returned."""
     pts = np.asarray(points, dtype=np.float64)
     size = np.asarray(size, dtype=np.float64).reshape(3)
     n = len(pts)
