@@ -29,6 +29,7 @@ import numpy as np
 from supportnode.geometry.freespace import FreeSpace
 from supportnode.geometry.objects import Cluster
 from supportnode.geometry.surfaces import Surface, detect_surfaces
+from supportnode.kernels.crop import crop_rows
 from supportnode.params import DetectParams
 from supportnode.pipeline import objects_stage, surfaces_stage
 
@@ -126,7 +127,7 @@ def begin_full(
     t = time.perf_counter()
     sr = detect_surfaces(pts, params.surfaces, sensor_origin=origin)
     timings["surfaces"] = time.perf_counter() - t
-    early = surfaces_stage(pts, sr, params, free_below, timings)
+    early = surfaces_stage(pts, sr, params, free_below, timings, sensor_origin=origin)
 
     def finish() -> Items:
         objects = objects_stage(early, params)
@@ -182,9 +183,12 @@ def begin_regional(
     """`regional`'s first phase (surfaces and free space; `Phase.finish` the rest)."""
 
     def fetch(blo: np.ndarray, bhi: np.ndarray, max_share: float) -> np.ndarray | None:
-        xy = points[:, :2]
-        in_crop = np.all((xy >= blo) & (xy <= bhi), axis=1)
-        return None if in_crop.sum() >= max_share * len(points) else points[in_crop]
+        # Given up as soon as the crop reaches max_share of the map (a moving sensor's
+        # scan changes most of it): one compiled pass, not a mask over all points.
+        share = max_share * len(points)
+        limit = int(np.ceil(share)) if share <= len(points) else len(points) + 1
+        rows = crop_rows(points, blo, bhi, limit)
+        return None if rows is None else np.take(points, rows, axis=0)
 
     return begin_regional_from(fetch, previous, lo, hi, params, origin, margin, free_below)
 

@@ -21,10 +21,10 @@ or sockets (tests and embedding): its results equal the published ones on the sa
         node.spin()                          # until SIGINT/SIGTERM or node.stop()
 
 Frames: a scan's points are in its cloud frame; its ``pose`` takes them to the map frame (no
-pose: the cloud frame is the map frame, a static sensor). Results are published in the map frame
-rotated by the gravity correction, named ``NodeParams.frame_id`` (the cloud's ``frame_id`` for
-scans without a pose). A surface is ``safe`` by `supportnode.detection.policy.is_safe` once seen
-in ``node.safe_min_hits`` detections in a row under the same id.
+pose: the cloud frame is the map frame). Results are in the map frame rotated by the gravity
+correction, named ``NodeParams.frame_id`` (the cloud's ``frame_id`` without a pose). A surface
+is ``safe`` (`detection.policy.is_safe`) once seen in ``node.safe_min_hits`` detections in a
+row under one id.
 """
 
 from __future__ import annotations
