@@ -20,12 +20,10 @@ or sockets (tests and embedding): its results equal the published ones on the sa
     with Node(params) as node:
         node.spin()                          # until SIGINT/SIGTERM or node.stop()
 
-Frames: a scan's points are in its cloud frame; its ``pose`` takes them to the map frame (no
-pose: the cloud frame is the map frame). Results are in the map frame rotated by the gravity
-correction, named ``NodeParams.frame_id`` (the cloud's ``frame_id`` without a pose). A surface
-is ``safe`` (`detection.policy.is_safe`) once seen in ``node.safe_min_hits`` detections in a
-row under one id.
-"""
+Frames: a scan's ``pose`` takes its points to the map frame (none: the cloud's frame is the
+map's). Results are in the map frame rotated by the gravity correction, named
+``NodeParams.frame_id``. A surface is ``safe`` (`detection.policy.is_safe`) once seen in
+``node.safe_min_hits`` detections in a row under one id."""
 
 from __future__ import annotations
 
