@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+# The test suite's scene builders (tests/geometry/test_gravity.py imports tests/camera_views).
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests", "geometry"))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common import docs_command, host_load, write_docs_block
 from test_gravity import angle_deg, room, rpy
