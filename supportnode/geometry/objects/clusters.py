@@ -23,6 +23,7 @@ from supportnode.geometry.objects.arrays import _group_by_label, _reduce_runs
 from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.geometry.objects.result import Segmentation
 from supportnode.geometry.objects.support_lookup import _SupportLookup, _supports
+from supportnode.kernels.components import label_edges
 from supportnode.params import ObjectParams
 
 # Voxel clustering uses a dense voxel -> id map up to this many grid cells per point (or this
@@ -100,8 +101,7 @@ def _cluster_voxel(
         same = vsup[r] == vsup[c]
         stats["support_cuts"] = int((~same).sum())
         r, c = r[same], c[same]
-    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(nv, nv))
-    _, comp = connected_components(graph.tocsr(), directed=False)
+    comp = label_edges(nv, r, c)  # numbered as scipy's connected_components, compiled
     stats["_voxel_of_point"] = inv.ravel()  # for the convex method's density test
     return comp[inv.ravel()].astype(np.int64)
 
