@@ -23,7 +23,7 @@ from supportnode.geometry.objects.arrays import _group_by_label, _reduce_runs
 from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.geometry.objects.result import Segmentation
 from supportnode.geometry.objects.support_lookup import _SupportLookup, _supports
-from supportnode.kernels.components import label_edges
+from supportnode.kernels.components import label_edges, label_voxel_grid
 from supportnode.params import ObjectParams
 
 # Voxel clustering uses a dense voxel -> id map up to this many grid cells per point (or this
@@ -85,63 +85,57 @@ def _cluster_voxel(
     keys = ijk[0] * strides[0] + ijk[1] * strides[1] + ijk[2]
     cells = int(dims.prod())
     if cells <= max(_DENSE_MIN_CELLS, _DENSE_CELLS_PER_POINT * m):
-        nv, inv, r, c = _voxel_links_dense(keys, strides, cells)
+        # A dense voxel -> id map: the voxels' links are followed in compiled code.
+        occupied = np.zeros(cells, dtype=bool)
+        occupied[keys] = True
+        vkeys = np.flatnonzero(occupied)
+        nv = len(vkeys)
+        # Ids only at occupied cells (the rest is never read): no fill of the whole grid.
+        vid = np.empty(cells, dtype=np.int32 if nv < 2**31 else np.int64)
+        vid[vkeys] = np.arange(nv)
+        of_point = vid[keys].astype(np.int64)
+        vsup = None if support is None else _highest_support(nv, of_point, support)
+        comp, cuts = label_voxel_grid(vkeys, occupied, vid, FORWARD_26 @ strides, vsup)
     else:
-        nv, inv, r, c = _voxel_links_sorted(keys, strides)
+        # Too large to map densely: the links as edge lists, by sorting.
+        nv, of_point, r, c = _voxel_links_sorted(keys, strides)
+        cuts = 0
+        if support is not None:
+            vsup = _highest_support(nv, of_point, support)
+            same = vsup[r] == vsup[c]
+            cuts = int((~same).sum())
+            r, c = r[same], c[same]
+        comp = label_edges(nv, r, c)  # numbered as scipy's connected_components, compiled
     stats["voxels"] = int(nv)
     if support is not None:
-        # The highest support among a voxel's points: independent of point order.
-        vsup = np.full(nv, -1, dtype=np.int64)
-        of_point = inv.ravel()
-        # One assignment per surface, lowest first (the last write stays): np.maximum.at
-        # over the points took several ms on a lidar scan.
-        for sid in np.flatnonzero(np.bincount(support + 1)) - 1:
-            if sid >= 0:
-                vsup[of_point[support == sid]] = sid
-        same = vsup[r] == vsup[c]
-        stats["support_cuts"] = int((~same).sum())
-        r, c = r[same], c[same]
-    comp = label_edges(nv, r, c)  # numbered as scipy's connected_components, compiled
-    stats["_voxel_of_point"] = inv.ravel()  # for the convex method's density test
-    return comp[inv.ravel()].astype(np.int64)
+        stats["support_cuts"] = int(cuts)
+    stats["_voxel_of_point"] = of_point  # for the convex method's density test
+    return comp[of_point]
 
 
-def _voxel_links_dense(
-    keys: np.ndarray, strides: np.ndarray, cells: int
-) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """Voxels and 26-neighbour links of the points' voxel keys (M,) int64 on a grid of cells
-    cells (strides (3,), an empty border around): the number of voxels V, the voxel of each
-    point (M,) int64 (voxels numbered in key order) and the links (E,) rows, (E,) columns.
-
-    A dense voxel -> id map: no sort, and each neighbour test is one gather. Same sorted voxel
-    numbering and the same edges as _voxel_links_sorted, 2-3x faster.
-    """
-    rows, cols = [], []
-    occupied = np.zeros(cells, dtype=bool)
-    occupied[keys] = True
-    vkeys = np.flatnonzero(occupied)
-    nv = len(vkeys)
-    # Ids only at occupied cells (the rest is never read): no fill of the whole grid, and
-    # the neighbour tests read the 4x smaller occupancy.
-    vid = np.empty(cells, dtype=np.int32 if nv < 2**31 else np.int64)
-    vid[vkeys] = np.arange(nv)
-    inv = vid[keys].astype(np.int64)
-    for off in FORWARD_26 @ strides:  # 13 vectorised look-ups, not a loop over voxels
-        nbk = vkeys + off  # never out of range: the empty border absorbs every offset
-        hit = np.flatnonzero(occupied[nbk])
-        rows.append(hit)
-        cols.append(vid[nbk[hit]])
-    return nv, inv, np.concatenate(rows), np.concatenate(cols)
+def _highest_support(nv: int, of_point: np.ndarray, support: np.ndarray) -> np.ndarray:
+    """(V,) int64 highest surface id under the points of each voxel (of_point (M,) voxel,
+    support (M,) surface per point, -1 none); -1 where none."""
+    vsup = np.full(nv, -1, dtype=np.int64)
+    # One assignment per surface, lowest first (the last write stays): np.maximum.at
+    # over the points took several ms on a lidar scan.
+    for sid in np.flatnonzero(np.bincount(support + 1)) - 1:
+        if sid >= 0:
+            vsup[of_point[support == sid]] = sid
+    return vsup
 
 
 def _voxel_links_sorted(
     keys: np.ndarray, strides: np.ndarray
 ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_voxel_links_dense` by np.unique and searchsorted, for grids too large to map
-    densely; the same values."""
+    """Voxels and 26-neighbour links of the points' voxel keys (M,) int64 (strides (3,), an
+    empty border around), by np.unique and searchsorted: the number of voxels V, the voxel of
+    each point (M,) int64 (voxels numbered in key order) and the links (E,) rows, (E,)
+    columns."""
     rows, cols = [], []
     vkeys, inv = np.unique(keys, return_inverse=True)
     nv = len(vkeys)
+    inv = inv.ravel()
     for off in FORWARD_26 @ strides:
         pos = np.searchsorted(vkeys, vkeys + off)
         pos = np.minimum(pos, nv - 1)

@@ -1,5 +1,5 @@
 """2-D bool raster operations of the footprint splits and the support look-up: hole filling,
-hole counting, 3 x 3 closing, taxicab depth test, bounding box of the set cells and the
+3 x 3 closing (both compiled, in `supportnode.kernels.footprint`), taxicab depth test, bounding box of the set cells and the
 Euclidean distance transform.
 
 Rasters are (H, W) bool arrays, True = occupied; distances are in cells. Each function gives
@@ -12,72 +12,25 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from supportnode.kernels.footprint import close3, fill_holes
+
 # _edt_inner works on the occupied cells only of rasters of at least this many cells, at most
 # _EDT_SPARSE_MAX_FILL of them occupied (a ring of walls: 2-4 %); scipy's on the rest.
 _EDT_SPARSE_MIN_CELLS = 16_384
 _EDT_SPARSE_MAX_FILL = 0.125
-# _fill_holes first counts the holes (see _hole_count) on rasters of at least this many cells:
-# a wall cluster's footprint (a thin ring, open at a door) usually has none.
-_FILL_CHECK_MIN_CELLS = 65_536
 
 
 def _fill_holes(mask: np.ndarray, max_cells: int | None = None) -> np.ndarray:
-    """``ndimage.binary_fill_holes(mask)`` for a 2-D mask, by one labelling of the background;
-    with ``max_cells``, only holes of at most that many cells are filled.
-
-    Holes are the 4-connected background components that do not touch the array's edge, as in
-    binary_fill_holes, whose iterated dilation from the edge is 3-4x slower on big rasters.
-    A large raster with no hole at all (see _hole_count) is returned as it is (mask itself).
-    """
-    if mask.size >= _FILL_CHECK_MIN_CELLS and _hole_count(mask) == 0:
-        return mask
-    lab, n = ndimage.label(~mask)
-    outside = np.zeros(n + 1, dtype=bool)
-    for edge in (lab[0], lab[-1], lab[:, 0], lab[:, -1]):  # the four edges of the raster
-        outside[edge] = True
-    if max_cells is not None:
-        outside |= np.bincount(lab.ravel(), minlength=n + 1) > max_cells
-    outside[0] = False  # label 0 is the mask itself
-    return ~outside[lab]
-
-
-def _hole_count(mask: np.ndarray) -> int:
-    """Number of holes of a 2-D bool mask, as _fill_holes counts them: 4-connected background
-    components that do not touch the edge.
-
-    By the Euler number of the 8-connected foreground (components minus holes, from the 2 x 2
-    windows of the zero-padded mask, Gray 1971): the holes are the bounded background
-    components of the padded plane, exactly those that do not touch the edge. Labelling the
-    sparse foreground of a wall cluster's footprint costs half as much as labelling its
-    background.
-    """
-    q = np.pad(mask, 1).view(np.uint8)
-    a, d = q[:-1, :-1], q[1:, 1:]
-    s = a + q[:-1, 1:] + q[1:, :-1] + d  # foreground cells in each 2 x 2 window
-    n1 = np.count_nonzero(s == 1)
-    n3 = np.count_nonzero(s == 3)
-    n_diag = np.count_nonzero((s == 2) & (a == d))  # two cells on a diagonal
-    euler = (n1 - n3 - 2 * n_diag) // 4
-    _, n_comp = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
-    return n_comp - euler
+    """``ndimage.binary_fill_holes(mask)`` for a 2-D mask (one compiled flood fill, see
+    `supportnode.kernels.footprint`); with ``max_cells``, only holes of at most that many
+    cells are filled."""
+    return fill_holes(mask, max_cells)
 
 
 def _close3(mask: np.ndarray) -> np.ndarray:
-    """``ndimage.binary_closing(mask, np.ones((3, 3)))`` of a 2-D bool mask (outside = empty).
-
-    As separable ORs then ANDs of shifted slices: scipy's closing (or max then min filters)
-    costs 5-10x more on the large, nearly empty footprint rasters of wall clusters.
-    """
-    h, w = mask.shape
-    pad = np.zeros((h + 4, w + 4), dtype=bool)
-    pad[2:-2, 2:-2] = mask
-    dil = pad[:-2] | pad[1:-1] | pad[2:]
-    dil = dil[:, :-2] | dil[:, 1:-1] | dil[:, 2:]  # (h + 2, w + 2): one ring beyond the raster
-    # The erosion sees the outside as empty (border_value=0), whatever the dilation put there.
-    dil[0] = dil[-1] = False
-    dil[:, 0] = dil[:, -1] = False
-    ero = dil[:-2] & dil[1:-1] & dil[2:]
-    return ero[:, :-2] & ero[:, 1:-1] & ero[:, 2:]
+    """``ndimage.binary_closing(mask, np.ones((3, 3)))`` of a 2-D bool mask (outside = empty),
+    compiled (see `supportnode.kernels.footprint`)."""
+    return close3(mask)
 
 
 def _taxicab_deep(mask: np.ndarray, cell: float, limit: float) -> bool:

@@ -16,12 +16,11 @@ from supportnode.geometry.objects.arrays import _col
 from supportnode.geometry.objects.raster import (
     _EDT_SPARSE_MAX_FILL,
     _EDT_SPARSE_MIN_CELLS,
-    _close3,
     _edt_inner,
-    _fill_holes,
     _taxicab_deep,
     _true_box,
 )
+from supportnode.kernels.footprint import footprint_raster
 
 # A split part must hold at least this fraction of the cluster's footprint cells.
 _SPLIT_MIN_FRACTION = 0.15
@@ -142,14 +141,12 @@ def _footprint_raster(ux: np.ndarray, uy: np.ndarray, shape: np.ndarray, cell: f
     """(H, W) = shape bool footprint of the points at raster coordinates ux, uy (P,) (in cells
     from the lower corner; an empty border is added), closed and its holes of up to
     _SPLIT_MAX_HOLE m^2 filled; cell in metres."""
-    occ = np.zeros(tuple(shape), dtype=bool)
-    # +1: empty border; truncation = floor (>= 0). One flat index, not a 2-D fancy index.
-    occ.reshape(-1)[(ux.astype(np.int64) + 1) * int(shape[1]) + uy.astype(np.int64) + 1] = True
     # Closing bridges the gaps between sample points (a 2 cm lattice on the 1 cm raster).
     # Filling holes makes a side-scanned barrel a disc, not a ring that erosion would wipe out,
     # and removes the speckle of sparse, noisy sampling that would fake saddles. (It also fills
     # the small gap between three barrels touching in a triangle, which then stay one object.)
-    return _fill_holes(occ | _close3(occ), max_cells=int(_SPLIT_MAX_HOLE / cell**2))
+    h, w = int(shape[0]), int(shape[1])
+    return footprint_raster(ux, uy, (h, w), int(_SPLIT_MAX_HOLE / cell**2))
 
 
 def _levels(top: float, cell: float, radius: float) -> list[float]:
