@@ -124,6 +124,18 @@ class ScanVoxelizer(StoreState):
                 cols, size, lo, dims, self._scan_scratch(n, int(np.prod(dims)))
             )
             return _ScanGrid(keys, counts, None, moments, local, voxel)
+        return self._voxelize_large(cols, kcols, lo, dims)
+
+    def _voxelize_large(
+        self, cols: list[np.ndarray], kcols: list[np.ndarray], lo: np.ndarray, dims: np.ndarray
+    ) -> _ScanGrid:
+        """`_voxelize` of a scan whose box holds more keys than the compiled pass's table
+        takes, by numpy: cols (N,) x, y, z columns, kcols their float voxel keys (overwritten
+        with the offsets from the corners), lo (3,) the lowest key, dims (3,) the box in
+        voxels (float). One function of ~70 lines, as `voxelize` is: each (N,) buffer is
+        reused in place the moment it is spent."""
+        size = self.size
+        n = len(cols[0])
         # Linear key of each point's voxel in the scan's box, in float64 (exact: integers
         # below 2^53) and in place, converted once.
         lin_f = self._buffer("lin_f", n, np.float64)

@@ -70,83 +70,19 @@ def polygons_cells_packed(polygons: list[np.ndarray], cell_size: float) -> list[
     live = [i for i, p in enumerate(polys) if len(p)]
     if not live:
         return out
-    ps = [polys[i] for i in live]
-    nv = np.array([len(p) for p in ps])
-    a = np.concatenate(ps)
-    vid = np.repeat(np.arange(len(ps)), nv)  # polygon of each vertex / edge
-    first = np.cumsum(nv) - nv
-    nxt = np.arange(len(a)) + 1
-    last = first + nv - 1
-    nxt[last] = first  # each polygon closes on its first vertex
-    d = a[nxt] - a
-    lo = np.stack([np.minimum.reduceat(a[:, k], first) for k in range(2)], axis=1)
-    hi = np.stack([np.maximum.reduceat(a[:, k], first) for k in range(2)], axis=1)
-    lo = np.floor(lo / cell_size).astype(np.int64)
-    hi = np.floor(hi / cell_size).astype(np.int64)
-    width = hi[:, 0] - lo[:, 0] + 1
-    height = hi[:, 1] - lo[:, 1] + 1
-    # Every column of every polygon.
-    cpid = np.repeat(np.arange(len(ps)), width)
-    cols = np.arange(len(cpid)) - np.repeat(np.cumsum(width) - width, width) + lo[cpid, 0]
-    y_lo = lo[cpid, 1].copy()
-    y_hi = hi[cpid, 1].copy()
-    xc = (cols + 0.5) * cell_size
-    # (edge, column) pairs of the same polygon, grouped by column; polygons of fewer than three
-    # vertices have no inside test (their cells are the outline's).
-    ne = np.where(nv >= 3, nv, 0)[cpid]
-    pcol = np.repeat(np.arange(len(cpid)), ne)
-    pe = np.arange(len(pcol)) - np.repeat(np.cumsum(ne) - ne, ne) + first[cpid[pcol]]
-    if len(pcol):
-        dx, dy = d[pe, 0], d[pe, 1]
-        x = xc[pcol]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # The same test as "cross product >= -1e-12" for every edge, solved for y.
-            line = a[pe, 1] + dy / dx * (x - a[pe, 0])
-            line -= 1e-12 / dx
-        has = np.flatnonzero(ne > 0)
-        starts = (np.cumsum(ne) - ne)[has]
-        up = dx > 0
-        low = np.maximum.reduceat(np.where(up, line, -np.inf), starts)
-        top = np.minimum.reduceat(np.where(dx < 0, line, np.inf), starts)
-        any_up = np.logical_or.reduceat(up, starts)
-        any_down = np.logical_or.reduceat(dx < 0, starts)
-        y_lo[has] = np.where(
-            any_up,
-            np.maximum(y_lo[has], np.ceil(low / cell_size - 0.5).astype(np.int64)),
-            y_lo[has],
-        )
-        y_hi[has] = np.where(
-            any_down,
-            np.minimum(y_hi[has], np.floor(top / cell_size - 0.5).astype(np.int64)),
-            y_hi[has],
-        )
-        vert = dx == 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bound = a[pe, 0] + 1e-12 / dy
-        fail = vert & (((dy > 0) & ~(x <= bound)) | ((dy < 0) & ~(x >= bound)))
-        drop = np.logical_or.reduceat(fail, starts)
-        y_hi[has] = np.where(drop, y_lo[has] - 1, y_hi[has])
+    e = _Edges.of([polys[i] for i in live], cell_size)
+    cpid, cols, y_lo, y_hi = _column_spans(e, cell_size)
     # Inside cells, as keys local to each polygon's bounding box: (ix - lo_x) * H + (iy - lo_y),
     # offset per polygon, so they sort like packed (ix, iy) within a polygon and by polygon.
-    box = width * height
+    box = e.width * e.height
     base = np.cumsum(box) - box
     n = np.maximum(y_hi - y_lo + 1, 0)
     ccol = np.repeat(np.arange(len(cpid)), n)
     cy = np.arange(len(ccol)) - np.repeat(np.cumsum(n) - n, n) + y_lo[ccol]
     p_in = cpid[ccol]
-    inside = base[p_in] + (cols[ccol] - lo[p_in, 0]) * height[p_in] + (cy - lo[p_in, 1])
-    # The cells along the outline and of the centroid (see polygon_cells_packed).
-    dd = np.where((nv > 1)[vid, None], d, 0.0)
-    steps = np.maximum(np.ceil(np.hypot(dd[:, 0], dd[:, 1]) / (0.5 * cell_size)), 1)
-    steps = steps.astype(np.int64)
-    e = np.repeat(np.arange(len(a)), steps)
-    t = (np.arange(len(e)) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[e]
-    edge = np.floor((a[e] + t[:, None] * dd[e]) / cell_size).astype(np.int64)
-    sums = np.stack([np.add.reduceat(a[:, k], first) for k in range(2)], axis=1)
-    own = np.floor(sums / nv[:, None] / cell_size).astype(np.int64)
-    ep = np.concatenate([vid[e], np.arange(len(ps))])
-    ec = np.concatenate([edge, own])
-    extra = base[ep] + (ec[:, 0] - lo[ep, 0]) * height[ep] + (ec[:, 1] - lo[ep, 1])
+    inside = base[p_in] + (cols[ccol] - e.lo[p_in, 0]) * e.height[p_in] + (cy - e.lo[p_in, 1])
+    ep, ec = _outline_cells(e, cell_size)
+    extra = base[ep] + (ec[:, 0] - e.lo[ep, 0]) * e.height[ep] + (ec[:, 1] - e.lo[ep, 1])
     extra, first_of = np.unique(extra, return_index=True)
     pos = np.searchsorted(inside, extra)
     new = np.ones(len(extra), bool)
@@ -155,11 +91,102 @@ def polygons_cells_packed(polygons: list[np.ndarray], cell_size: float) -> list[
     inside_packed = _pack(cols[ccol], cy)
     extra_packed = _pack(ec[first_of[new], 0], ec[first_of[new], 1])
     packed = np.insert(inside_packed, pos[new], extra_packed)
-    count = np.bincount(p_in, minlength=len(ps)) + np.bincount(ep[first_of[new]], minlength=len(ps))
+    n_poly = len(e.nv)
+    count = np.bincount(p_in, minlength=n_poly) + np.bincount(ep[first_of[new]], minlength=n_poly)
     bounds = np.concatenate([[0], np.cumsum(count)])
     for k, i in enumerate(live):  # one slice per polygon
         out[i] = packed[bounds[k] : bounds[k + 1]]
     return out
+
+
+@dataclass
+class _Edges:
+    """The polygons of :func:`polygons_cells_packed` as one edge list: vertices a (V, 2) m,
+    edge vectors d (V, 2) (each vertex to the next, the last closing on the first), polygon of
+    each vertex vid (V,), first vertex (P,) and vertex count nv (P,) per polygon, and each
+    polygon's bounding box in cells lo, hi (P, 2), width, height (P,)."""
+
+    a: np.ndarray
+    d: np.ndarray
+    vid: np.ndarray
+    first: np.ndarray
+    nv: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+
+    @classmethod
+    def of(cls, polys: list[np.ndarray], cell_size: float) -> _Edges:
+        nv = np.array([len(p) for p in polys])
+        a = np.concatenate(polys)
+        vid = np.repeat(np.arange(len(polys)), nv)
+        first = np.cumsum(nv) - nv
+        nxt = np.arange(len(a)) + 1
+        nxt[first + nv - 1] = first  # each polygon closes on its first vertex
+        lo = np.stack([np.minimum.reduceat(a[:, k], first) for k in range(2)], axis=1)
+        hi = np.stack([np.maximum.reduceat(a[:, k], first) for k in range(2)], axis=1)
+        lo = np.floor(lo / cell_size).astype(np.int64)
+        hi = np.floor(hi / cell_size).astype(np.int64)
+        width, height = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
+        return cls(a, a[nxt] - a, vid, first, nv, lo, hi, width, height)
+
+
+def _column_spans(
+    e: _Edges, cell_size: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every grid column of every polygon: its polygon (C,), column index (C,) and the first
+    and last inside cell row (C,) (last < first: none), from the edges that bound the column
+    from below (running towards +x) and above (towards -x)."""
+    cpid = np.repeat(np.arange(len(e.nv)), e.width)
+    cols = np.arange(len(cpid)) - np.repeat(np.cumsum(e.width) - e.width, e.width)
+    cols += e.lo[cpid, 0]
+    y_lo = e.lo[cpid, 1].copy()
+    y_hi = e.hi[cpid, 1].copy()
+    # (edge, column) pairs of the same polygon, grouped by column; polygons of fewer than three
+    # vertices have no inside test (their cells are the outline's).
+    ne = np.where(e.nv >= 3, e.nv, 0)[cpid]
+    pcol = np.repeat(np.arange(len(cpid)), ne)
+    if len(pcol) == 0:
+        return cpid, cols, y_lo, y_hi
+    pe = np.arange(len(pcol)) - np.repeat(np.cumsum(ne) - ne, ne) + e.first[cpid[pcol]]
+    dx, dy = e.d[pe, 0], e.d[pe, 1]
+    x = ((cols + 0.5) * cell_size)[pcol]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # The same test as "cross product >= -1e-12" for every edge, solved for y.
+        line = e.a[pe, 1] + dy / dx * (x - e.a[pe, 0])
+        line -= 1e-12 / dx
+        bound = e.a[pe, 0] + 1e-12 / dy
+    has = np.flatnonzero(ne > 0)
+    starts = (np.cumsum(ne) - ne)[has]
+    up = dx > 0
+    low = np.maximum.reduceat(np.where(up, line, -np.inf), starts)
+    top = np.minimum.reduceat(np.where(dx < 0, line, np.inf), starts)
+    any_up = np.logical_or.reduceat(up, starts)
+    any_down = np.logical_or.reduceat(dx < 0, starts)
+    raised = np.maximum(y_lo[has], np.ceil(low / cell_size - 0.5).astype(np.int64))
+    y_lo[has] = np.where(any_up, raised, y_lo[has])
+    lowered = np.minimum(y_hi[has], np.floor(top / cell_size - 0.5).astype(np.int64))
+    y_hi[has] = np.where(any_down, lowered, y_hi[has])
+    fail = (dx == 0) & (((dy > 0) & ~(x <= bound)) | ((dy < 0) & ~(x >= bound)))
+    drop = np.logical_or.reduceat(fail, starts)
+    y_hi[has] = np.where(drop, y_lo[has] - 1, y_hi[has])
+    return cpid, cols, y_lo, y_hi
+
+
+def _outline_cells(e: _Edges, cell_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cells along each polygon's outline (sampled every half cell) and of its centroid
+    (see polygon_cells_packed): polygon (K,) and cell (K, 2) int64, with repeats."""
+    dd = np.where((e.nv > 1)[e.vid, None], e.d, 0.0)
+    steps = np.maximum(np.ceil(np.hypot(dd[:, 0], dd[:, 1]) / (0.5 * cell_size)), 1)
+    steps = steps.astype(np.int64)
+    k = np.repeat(np.arange(len(e.a)), steps)
+    t = (np.arange(len(k)) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[k]
+    edge = np.floor((e.a[k] + t[:, None] * dd[k]) / cell_size).astype(np.int64)
+    sums = np.stack([np.add.reduceat(e.a[:, j], e.first) for j in range(2)], axis=1)
+    own = np.floor(sums / e.nv[:, None] / cell_size).astype(np.int64)
+    ep = np.concatenate([e.vid[k], np.arange(len(e.nv))])
+    return ep, np.concatenate([edge, own])
 
 
 def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
