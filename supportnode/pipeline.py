@@ -10,7 +10,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,9 +46,9 @@ class Detection:
     rotation: np.ndarray | None = None  # (3, 3) applied to the input, None when not aligned
     gravity: GravityEstimate | None = None  # when alignment ran
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no per-point arrays)."""
-        out: dict = {
+        out: dict[str, Any] = {
             "timings": {k: round(v, 6) for k, v in self.timings.items()},
             "surfaces": [s.to_dict() for s in self.surfaces.surfaces],
             "objects": [c.to_dict() for c in self.objects.clusters] if self.objects else [],
@@ -65,7 +65,7 @@ class Detection:
         return out
 
 
-def _gravity_summary(g: GravityEstimate | None) -> dict:
+def _gravity_summary(g: GravityEstimate | None) -> dict[str, Any]:
     if g is None:
         return {}
     return {

@@ -274,16 +274,7 @@ def begin_regional_from(
     sid_old = {s.id: k for k, s in enumerate(old_s)}
     sid_new = {s.id: len(old_s) + k for k, s in enumerate(keep_s)}
     surfaces = [dataclasses.replace(s, id=k) for k, s in enumerate(old_s + keep_s)]
-    free = [
-        dataclasses.replace(f, surface_id=sid_old[f.surface_id])
-        for f in previous.free
-        if f.surface_id in sid_old
-    ]
-    free += [
-        dataclasses.replace(f, surface_id=sid_new[f.surface_id])
-        for f in new.free
-        if f.surface_id in sid_new
-    ]
+    free = _renumbered(previous.free, sid_old) + _renumbered(new.free, sid_new)
 
     def finish() -> Items:
         done = new.finish()
@@ -303,6 +294,13 @@ def begin_regional_from(
         return out
 
     return Phase(surfaces, free, finish)
+
+
+def _renumbered(free: list[FreeSpace], sid: dict[int, int]) -> list[FreeSpace]:
+    """The free space of the surfaces kept, by the surfaces' new ids (sid: old id -> new)."""
+    return [
+        dataclasses.replace(f, surface_id=sid[f.surface_id]) for f in free if f.surface_id in sid
+    ]
 
 
 def _objects_of_full(
