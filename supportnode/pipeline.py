@@ -27,7 +27,7 @@ from supportnode.geometry.objects import (
     split_objects,
 )
 from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
-from supportnode.geometry.transform import transform_points
+from supportnode.kernels.rotate import transform_points_fast
 from supportnode.params import DetectParams
 
 if TYPE_CHECKING:  # the estimator is imported only when alignment runs
@@ -190,7 +190,7 @@ def detect(
         rotation = gravity.rotation
         if origin_assumed and not _sensor_off_the_plane(gravity, params):
             sensor_origin = None
-        pts = transform_points(pts, rotation)
+        pts = transform_points_fast(pts, rotation)  # compiled: ~3x numpy's 9 passes
         timings["gravity"] = time.perf_counter() - t
     t = time.perf_counter()
     origin = _in_detection_frame(sensor_origin, rotation)
