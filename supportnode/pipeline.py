@@ -133,16 +133,19 @@ def surfaces_stage(
     return Early(surfaces, free, components, timings, pending)
 
 
-def objects_stage(early: Early, params: DetectParams, memo: Memo | None = None) -> ObjectResult:
+def objects_stage(
+    early: Early, params: DetectParams, memo: Memo | None = None, volumes: bool = True
+) -> ObjectResult:
     """The objects of `surfaces_stage`'s components: touching objects split, then described
-    (hulls, boxes); adds its time to ``early.timings["objects"]``."""
+    (hulls, boxes; volumes False: no convex-hull volumes, NaN); adds its time to
+    ``early.timings["objects"]``."""
     t = time.perf_counter()
     components = early.components
     if early.pending is not None:
         pts, origin = early.pending
         components = convex_components(components, pts, early.surfaces, params.objects, origin)
     segmentation = split_objects(components, params.objects, memo)
-    result = describe_objects(segmentation, memo)
+    result = describe_objects(segmentation, memo, volumes)
     early.timings["objects"] = early.timings.get("objects", 0.0) + time.perf_counter() - t
     return result
 

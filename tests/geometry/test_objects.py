@@ -441,6 +441,27 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     np.testing.assert_array_equal(dense, clusters._cluster_voxel(cp * 0.3, 0.03, {}, fast))
 
 
+def test_footprints_without_volumes_are_the_same_polygons():
+    """The node's describe (no 3-D hulls) gives the offline footprints, vertex for vertex."""
+    from supportnode.geometry.objects.hull import _hulls
+
+    rng = np.random.default_rng(3)
+    lines = rng.uniform(0, 1, (200, 2))
+    clouds = [
+        rng.normal(0, 0.1, (5000, 3)),  # sampled down to _HULL_MAX_POINTS first
+        np.c_[np.repeat(lines, 20, axis=0), rng.uniform(0, 1, 4000)],  # lidar columns
+        box((0.0, 0.0, 0.0), (0.3, 0.2, 0.1)),
+        np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]),  # too few for a 3-D hull
+    ]
+    for p in clouds:
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        footprint, volume = _hulls(p, lo, hi)
+        fast, no_volume = _hulls(p, lo, hi, volume=False)
+        np.testing.assert_array_equal(fast, footprint)
+        assert np.isnan(no_volume) and volume >= 0.0
+        assert (fast[0] == np.min(fast[fast[:, 0] == fast[:, 0].min()], axis=0)).all()
+
+
 def barrel_triangle(r: float = 0.06, step: float = 0.005) -> np.ndarray:
     """Three touching vertical cylinders with centres on a triangle of side 2r, (P, 3)."""
     centres = [(-r, 0.0), (r, 0.0), (0.0, r * np.sqrt(3.0))]

@@ -17,8 +17,9 @@ from supportnode.geometry.objects.result import Cluster, Segmentation
 from supportnode.geometry.objects.support import supported_by
 
 
-def _describe(seg: Segmentation, memo: Memo | None = None) -> list[Cluster]:
-    """Hulls, oriented boxes and heights of the clusters of seg, in its order."""
+def _describe(seg: Segmentation, memo: Memo | None = None, volumes: bool = True) -> list[Cluster]:
+    """Hulls, oriented boxes and heights of the clusters of seg, in its order; volumes False:
+    no convex-hull volumes (NaN), see _hulls."""
     if len(seg.surface_ids) == 0:
         return []
     runs = seg._runs.tolist()
@@ -28,10 +29,14 @@ def _describe(seg: Segmentation, memo: Memo | None = None) -> list[Cluster]:
     rows = np.ascontiguousarray(seg._grouped.T)
     lo, hi = seg.bbox_min, seg.bbox_max  # bounding boxes: the same min / max as per cluster
     if memo is None:
-        hulls = [_hulls(p, lo[cid], hi[cid]) for cid, p in enumerate(groups)]  # per cluster
+        hulls = [_hulls(p, lo[cid], hi[cid], volumes) for cid, p in enumerate(groups)]
     else:  # lo, hi are p's own bounds: a pure function of p
         hulls = [
-            memo.get("hull", p, functools.partial(_hulls, p, lo[cid], hi[cid]))
+            memo.get(
+                "hull" if volumes else "footprint",
+                p,
+                functools.partial(_hulls, p, lo[cid], hi[cid], volumes),
+            )
             for cid, p in enumerate(groups)
         ]  # per cluster
     # The hulls, never the raw points: the edge search is quadratic in the vertices.

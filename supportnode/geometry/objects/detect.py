@@ -267,11 +267,15 @@ def _full_labels(n: int, cand: np.ndarray, lab: np.ndarray) -> np.ndarray:
     return labels
 
 
-def describe_objects(seg: Segmentation, memo: Memo | None = None) -> ObjectResult:
+def describe_objects(
+    seg: Segmentation, memo: Memo | None = None, volumes: bool = True
+) -> ObjectResult:
     """The second half of :func:`detect_objects`: the clusters of ``seg`` described (hulls,
-    oriented boxes, heights). memo: as for detect_objects."""
+    oriented boxes, heights). memo: as for detect_objects. volumes False: each cluster's
+    volume is NaN, its 3-D convex hull not taken (the same footprints, in a third of the
+    time)."""
     t = time.perf_counter()
-    clusters = _describe(seg, memo)
+    clusters = _describe(seg, memo, volumes)
     _stack(clusters, seg._heights)
     stats = dict(seg.stats)
     stats["time_describe_s"] = time.perf_counter() - t + stats.pop("time_order_s", 0.0)

@@ -23,39 +23,58 @@ _HASH_X = np.uint64(0x9E3779B97F4A7C15)
 _HASH_Y = np.uint64(0xBF58476D1CE4E5B9)
 
 
-def _hulls(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, float]:
+def _hulls(
+    p: np.ndarray, lo: np.ndarray, hi: np.ndarray, volume: bool = True
+) -> tuple[np.ndarray, float]:
     """x, y footprint (K, 2) (see _hull_2d) and convex-hull volume (m^3) of p (P, 3).
 
     lo, hi: (3,) bounding box of p. The footprint is the 2-D hull of the 3-D hull's vertices
     only: projecting a convex hull gives the hull of the projected vertices, and the 3-D hull
-    has a few dozen vertices where a wall cluster has 80k points.
+    has a few dozen vertices where a wall cluster has 80k points. volume False: the footprint
+    straight from the 2-D hull of the same points (the same polygon, for a third of the
+    time: the node's messages carry no volume) and a volume of NaN.
     """
-    volume, verts = 0.0, None
-    # A set flat along an axis has no volume; Qhull would raise (slowly) on it.
-    if len(p) >= 4 and (hi > lo).all():
-        q = np.compress(_column_ends(p), p, axis=0) if len(p) >= _COLUMN_DEDUPE_MIN else p
-        if len(q) > _HULL_MAX_POINTS:
-            # A depth camera's object is a dense surface: an even sample and the points
-            # extreme along the axes give its hull within a point spacing, in a fraction of
-            # Qhull's time on all of them.
-            ext = np.r_[q.argmin(axis=0), q.argmax(axis=0)]
-            q = np.concatenate([q[:: -(-len(q) // _HULL_MAX_POINTS)], q[ext]])
-        try:
-            hull = ConvexHull(q)
-            # hull.vertices is np.unique(hull.simplices): a mask keeps the same rows in the
-            # same (input) order without the sort.
-            used = np.zeros(len(q), dtype=bool)
-            used[hull.simplices] = True
-            volume, verts = float(hull.volume), np.compress(used, q, axis=0)
-        except (QhullError, ValueError):
-            pass
     if not (hi[:2] > lo[:2]).all():
         # All on one line x = c or y = c (a wall strip seen edge-on): what _hull_2d returns
         # for collinear sets, its two ends in sorted order (or the one point), without the
         # failed Qhull call and the sort of all points.
         ends = np.array([lo[:2], hi[:2]])
-        return (ends[:1] if (ends[0] == ends[1]).all() else ends), volume
-    return _hull_2d(p[:, :2] if verts is None else verts[:, :2]), volume
+        footprint = ends[:1] if (ends[0] == ends[1]).all() else ends
+        return footprint, (0.0 if volume else float("nan"))  # flat: no volume
+    # A set flat along an axis has no volume; Qhull would raise (slowly) on it.
+    solid = len(p) >= 4 and (hi > lo).all()
+    q = _hull_candidates(p) if solid else p
+    if not volume:
+        return _hull_2d(q[:, :2]), float("nan")
+    vol, verts = _hull_3d(q) if solid else (0.0, None)
+    return _hull_2d(p[:, :2] if verts is None else verts[:, :2]), vol
+
+
+def _hull_candidates(p: np.ndarray) -> np.ndarray:
+    """The points of p (P, 3) the hull is taken of: the ends of vertical lines (see
+    _column_ends), and of a dense cluster an even sample and the extremes along the axes."""
+    q = np.compress(_column_ends(p), p, axis=0) if len(p) >= _COLUMN_DEDUPE_MIN else p
+    if len(q) > _HULL_MAX_POINTS:
+        # A depth camera's object is a dense surface: an even sample and the points extreme
+        # along the axes give its hull within a point spacing, in a fraction of Qhull's time
+        # on all of them.
+        ext = np.r_[q.argmin(axis=0), q.argmax(axis=0)]
+        q = np.concatenate([q[:: -(-len(q) // _HULL_MAX_POINTS)], q[ext]])
+    return q
+
+
+def _hull_3d(q: np.ndarray) -> tuple[float, np.ndarray | None]:
+    """Volume (m^3) and vertices (V, 3) of the convex hull of q (Q, 3); 0 and None when Qhull
+    finds it degenerate."""
+    try:
+        hull = ConvexHull(q)
+    except (QhullError, ValueError):
+        return 0.0, None
+    # hull.vertices is np.unique(hull.simplices): a mask keeps the same rows in the same
+    # (input) order without the sort.
+    used = np.zeros(len(q), dtype=bool)
+    used[hull.simplices] = True
+    return float(hull.volume), np.compress(used, q, axis=0)
 
 
 def _oriented_rect(xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
@@ -186,4 +205,7 @@ def _hull_2d(xy: np.ndarray) -> np.ndarray:
         d = uniq - uniq[0]
         t = d @ (d[np.argmax((d**2).sum(axis=1))])
         return uniq[[np.argmin(t), np.argmax(t)]]
-    return xy[hull.vertices]  # scipy gives 2-D hull vertices counter-clockwise
+    ring = hull.vertices  # scipy gives 2-D hull vertices counter-clockwise
+    # From the lowest x (then y): the same ring whatever points Qhull was given.
+    first = np.lexsort((xy[ring, 1], xy[ring, 0]))[0]
+    return xy[np.roll(ring, -first)]

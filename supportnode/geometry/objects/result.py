@@ -32,7 +32,7 @@ class Cluster:
     obb_yaw: float  # radians in (-pi/2, pi/2], direction of the length axis
     height: float  # top above the surface height (above its own bottom when surface_id is None)
     footprint: np.ndarray  # (K, 2) float64 convex hull in x, y, counter-clockwise
-    volume: float  # convex-hull volume, m^3 (0 for degenerate sets)
+    volume: float  # convex-hull volume, m^3 (0 for degenerate sets; NaN: not computed)
     supported_by: int = -1  # id of the cluster it stands on, -1 when on its surface (or none)
 
     def to_dict(self) -> dict:
