@@ -1,5 +1,5 @@
 """Node keys that no other test sets: the topic names and the gravity fusion's angle and vote.
-(tests/test_config_keys.py lists, for every key of config/default.yaml, what shows it matters.)"""
+(tests/config/test_config_keys.py lists, for every key of config/default.yaml, what shows it matters.)"""
 
 from __future__ import annotations
 

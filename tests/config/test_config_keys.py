@@ -26,7 +26,7 @@ from supportnode.sim.sensors import DepthCamera
 from supportnode.sim.simulate import sampled, scans
 from supportnode.sim.trajectory import poses_for
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "config" / "default.yaml"
 
 # key -> (scene[@points], changed value, context settings, align)

@@ -26,7 +26,7 @@ from supportnode.config import (
 from supportnode.errors import ConfigError, SupportNodeError
 from supportnode.params import DetectParams, FreeSpaceParams, ObjectParams, SurfaceParams
 
-CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 
 
 def write(tmp_path: Path, text: str, name: str = "my.yaml") -> Path:
