@@ -1,10 +1,12 @@
 """Per-point normals from the covariance of the k nearest neighbours.
 
-One exact k-nearest-neighbour search for all points (in the tree's leaf order, within a search
-radius estimated from a sample), covariances summed over each point's neighbours in compiled
-code (chunked so memory stays bounded, the next chunk's search running meanwhile), and the
-closed-form 3x3 eigen solver of :mod:`supportnode.geometry.linalg`. No
-Python loop runs per point.
+One exact k-nearest-neighbour search for all points: through a grid of cells in compiled code
+(`supportnode.kernels.knn`, queries in cell order) for clouds of 16k points and more, else a
+k-d tree (in the tree's leaf order, within a search radius estimated from a sample);
+covariances summed over each point's neighbours in compiled code (chunked so memory stays
+bounded), and the closed-form 3x3 eigen solver of :mod:`supportnode.geometry.linalg`. No
+Python loop runs per point. Both searches give the same neighbours, in the same order where
+distances tie: the same normals, bit for bit.
 
 The report's optional normal filter (k=30, 160 s on 108k points there) is
 :func:`filter_vertical_normals`, with the report's own suggested improvement: normals are
@@ -16,12 +18,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen_entries
+
+if TYPE_CHECKING:
+    from supportnode.kernels.knn import KnnGrid
 
 __all__ = ["estimate_normals", "filter_vertical_normals", "normals_at"]
 
@@ -31,6 +37,8 @@ _CHUNK_VALUES = 600_000
 # Queries below this are searched on one thread: a k-d tree query of 500 points (k = 10) took
 # 0.65 ms on one thread and 0.88 ms on all (two) cores, which first have to be started.
 _PARALLEL_MIN_QUERIES = 2048
+# Clouds from which the exact search goes through a grid of cells (see _grid).
+_GRID_MIN_POINTS = 16_384
 # Queries from which a search radius is estimated first (see _knn_bound).
 _BOUND_MIN_QUERIES = 16_384
 
@@ -160,6 +168,41 @@ def _knn_bound(tree: cKDTree, query: np.ndarray, k: int, workers: int) -> float 
     return bound if np.isfinite(bound) and bound > 0 else None
 
 
+def _grid(pts: np.ndarray, k: int) -> KnnGrid | None:
+    """A grid for the exact k-nearest search of (N, 3) points (see `kernels.knn`), its cells
+    0.7 of a typical k-th neighbour distance (measured best on sampled rooms and scans:
+    most queries finish in their own and the next shell of cells); None for small clouds
+    (the k-d tree is as fast) or where the grid would be too large.
+
+    The typical distance is the median k/8-th neighbour distance, among every 8th point, of
+    ~500 evenly spread points: the same radius as the k-th among all, whatever the cloud's
+    dimension (lines, surfaces, volumes), for a tree of an eighth of the points."""
+    from supportnode.kernels.knn import KnnGrid
+
+    if len(pts) < _GRID_MIN_POINTS or k > len(pts) // 8:
+        return None
+    sub = pts[::8]
+    k_sub = max(2, -(-k // 8))
+    dist, _ = cKDTree(sub).query(pts[:: max(1, len(pts) // 512)], k=k_sub + 1)
+    typical = float(np.median(dist[:, -1]))  # +1: a sampled point finds itself first
+    if not (np.isfinite(typical) and typical > 0):
+        return None
+    return KnnGrid.build(pts, 0.7 * typical)
+
+
+def _grid_normals(grid: KnnGrid, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """`normals_at` with the neighbours from ``grid`` (the points' own), chunk by chunk."""
+    m = len(query)
+    normals = np.empty((m, 3), dtype=np.float64)
+    curvature = np.empty(m, dtype=np.float64)
+    c = _centred(grid.points)
+    chunk = max(1, _CHUNK_VALUES // k)
+    for start in range(0, m, chunk):  # ~20k queries at a time: bounded memory
+        idx = grid.query(query[start : start + chunk], k)
+        _chunk_normals(c, idx, normals, curvature, start)
+    return normals, curvature
+
+
 def estimate_normals(
     points: np.ndarray,
     k: int = 30,
@@ -178,12 +221,18 @@ def estimate_normals(
     pts = _as_points(points)
     if k < 3:
         raise InputError(f"k must be at least 3 for a plane fit, got {k}")
-    tree = cKDTree(pts, balanced_tree=False)  # sliding-midpoint build: 2x faster, same queries
-    # Query in the tree's leaf order: neighbouring queries then touch the same nodes and the
-    # same rows of the moments, which measured 10-25% faster than input order on unordered
-    # clouds. (Sorting the points themselves by a coarse tree first measured no faster.)
-    order = tree.indices
-    found, curv = normals_at(tree, pts, np.take(pts, order, axis=0), k, workers)
+    grid = _grid(pts, k)
+    if grid is not None:
+        # Queries in cell order: neighbouring queries read the same cells and moments.
+        order = grid.sorted_index
+        found, curv = _grid_normals(grid, np.take(pts, order, axis=0), k)
+    else:
+        tree = cKDTree(pts, balanced_tree=False)  # sliding-midpoint build: 2x faster
+        # Query in the tree's leaf order: neighbouring queries then touch the same nodes and
+        # the same rows of the moments, which measured 10-25% faster than input order on
+        # unordered clouds. (Sorting the points by a coarse tree first measured no faster.)
+        order = tree.indices
+        found, curv = normals_at(tree, pts, np.take(pts, order, axis=0), k, workers)
     # Back to input order by a gather (np.take: 3-5x faster than fancy row indexing).
     rank = np.empty(len(order), dtype=np.intp)
     rank[order] = np.arange(len(order))  # query number of each input point
@@ -221,8 +270,14 @@ def filter_vertical_normals(
     keep = np.zeros(pts.shape[0], dtype=bool)
     if not mask.any():
         return keep
-    tree = cKDTree(pts, balanced_tree=False)
-    sel = tree.indices[mask[tree.indices]]  # candidates in the tree's leaf order, for locality
-    normals, _ = normals_at(tree, pts, pts[sel], k, workers=workers)
+    k = min(k, len(pts))
+    grid = _grid(pts, k)
+    if grid is not None:
+        sel = grid.sorted_index[mask[grid.sorted_index]]  # candidates in cell order
+        normals, _ = _grid_normals(grid, pts[sel], k)
+    else:
+        tree = cKDTree(pts, balanced_tree=False)
+        sel = tree.indices[mask[tree.indices]]  # candidates in the tree's leaf order
+        normals, _ = normals_at(tree, pts, pts[sel], k, workers=workers)
     keep[sel] = np.abs(normals[:, 2]) >= np.cos(np.radians(max_tilt_deg))
     return keep

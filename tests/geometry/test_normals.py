@@ -110,3 +110,23 @@ def test_sym3_eigen_matches_eigh() -> None:
     e0, n0 = sym3_eigen(np.zeros((2, 3, 3)))
     np.testing.assert_array_equal(n0, [[0, 0, 1.0], [0, 0, 1.0]])
     assert (e0 == 0).all()
+
+
+def test_grid_search_gives_the_k_d_trees_normals_bit_for_bit(monkeypatch: pytest.MonkeyPatch):
+    """Clouds of 16k points and more search their neighbours through a grid of cells: the same
+    normals and curvature, and the same filter decisions, as the k-d tree's."""
+    from supportnode.geometry import normals as mod
+
+    rng = np.random.default_rng(5)
+    floor = np.c_[rng.uniform(-2, 2, (15000, 2)), rng.normal(0, 0.002, 15000)]
+    box = rng.uniform(-0.2, 0.2, (6000, 3)) + [0.5, 0.5, 0.2]
+    pts = np.concatenate([floor, box])
+    mask = pts[:, 2] < 0.05
+    assert mod._grid(pts, 30) is not None  # the grid path is the one taken
+    got = mod.estimate_normals(pts, k=30, viewpoint=np.array([0.0, 0.0, 2.0]))
+    kept = mod.filter_vertical_normals(pts, mask)
+    monkeypatch.setattr(mod, "_grid", lambda p, k: None)
+    want = mod.estimate_normals(pts, k=30, viewpoint=np.array([0.0, 0.0, 2.0]))
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    np.testing.assert_array_equal(kept, mod.filter_vertical_normals(pts, mask))
