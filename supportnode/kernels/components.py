@@ -32,6 +32,13 @@ def _label(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
                 parent[b] = a
             else:
                 parent[a] = b
+    return _numbered(parent)
+
+
+@njit(cache=True)
+def _numbered(parent: np.ndarray) -> np.ndarray:
+    # Components numbered by their smallest member, which is each root (see _label).
+    n = parent.size
     labels = np.empty(n, np.int64)
     next_label = 0
     for i in range(n):
@@ -87,16 +94,7 @@ def _label_grid(
                 parent[b] = a
             elif b < a:
                 parent[a] = b
-    labels = np.empty(n, np.int64)
-    next_label = 0
-    for i in range(n):
-        r = _find(parent, i)
-        if r == i:
-            labels[i] = next_label
-            next_label += 1
-        else:
-            labels[i] = labels[r]
-    return labels, cuts
+    return _numbered(parent), cuts
 
 
 def label_voxel_grid(
