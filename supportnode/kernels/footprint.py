@@ -116,12 +116,52 @@ def _fill_holes(mask: np.ndarray, max_cells: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def _label8(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    # Foreground runs along rows, joined to the runs of the row above that touch them
+    # (sharing or diagonally meeting a column); components numbered by their first run, which
+    # is raster order: scipy's numbering.
+    h, w = mask.shape
+    runs, first, n = _background_runs(~mask)
+    parent = np.arange(n)
+    for i in range(1, h):
+        a, b = first[i - 1], first[i]
+        while a < first[i] and b < first[i + 1]:
+            if runs[a, 1] <= runs[b, 2] and runs[b, 1] <= runs[a, 2]:
+                ra, rb = _find(parent, a), _find(parent, b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+            if runs[a, 2] < runs[b, 2]:
+                a += 1
+            else:
+                b += 1
+    label = np.zeros(n, np.int32)
+    count = 0
+    out = np.zeros((h, w), np.int32)
+    for r in range(n):
+        root = _find(parent, r)
+        if root == r:
+            count += 1
+            label[r] = count
+        else:
+            label[r] = label[root]
+        out[runs[r, 0], runs[r, 1] : runs[r, 2]] = label[r]
+    return out, count
+
+
+@njit(cache=True)
 def _rasterise(ux: np.ndarray, uy: np.ndarray, h: int, w: int) -> np.ndarray:
     occ = np.zeros((h, w), np.bool_)
     for r in range(ux.shape[0]):
         # Truncation is floor for the coordinates >= 0 given; +1: the empty border.
         occ[int(ux[r]) + 1, int(uy[r]) + 1] = True
     return occ
+
+
+def label8(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """``ndimage.label(mask, structure=np.ones((3, 3)))`` of an (H, W) bool raster: (H, W)
+    int32 labels 1..n of the 8-connected components (0 outside), numbered in raster order of
+    their first cell, and n."""
+    return _label8(np.ascontiguousarray(mask, dtype=np.bool_))
 
 
 def close3(mask: np.ndarray) -> np.ndarray:
@@ -157,4 +197,5 @@ def footprint_raster(
 def _warm() -> None:
     footprint_raster(np.array([0.5, 2.5]), np.array([0.5, 1.5]), (6, 5), 4)
     close3(np.zeros((3, 3), bool))
+    label8(np.eye(3, dtype=bool))
     fill_holes(np.zeros((3, 3), bool))

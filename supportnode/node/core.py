@@ -22,14 +22,14 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from supportnode.detection.policy import is_safe
 from supportnode.errors import InputError
 from supportnode.geometry.transform import quaternion_matrix, transform_points
-from supportnode.map import VoxelMap
+from supportnode.map import Touched, VoxelMap
 from supportnode.msgs import ObstacleClusters, PointCloud, SupportSurfaces
 from supportnode.node import incremental
 from supportnode.node.gravity import Gravity, report_verdict
@@ -68,12 +68,16 @@ DETECT_COUNTERS = ("detections", "incremental_detections", "detections_reused")
 
 
 class MapLike(Protocol):
-    """What the core needs of a map (`supportnode.map.VoxelMap`). A map may also have an int
-    ``version`` that changes whenever its points may have: the core then reuses the previous
-    detection of an unchanged map (its result is the same)."""
+    """What the core needs of a map (`supportnode.map.VoxelMap`): ``version`` changes
+    whenever its points may have (the core reuses the previous detection of an unchanged
+    map: its result is the same); ``integrate`` says what a scan changed (`Touched`: the
+    detection then looks again there only); ``centroids`` is the map as published."""
 
-    def integrate(self, points: np.ndarray, pose: np.ndarray, stamp: float) -> Any: ...
+    version: int
+
+    def integrate(self, points: np.ndarray, pose: np.ndarray, stamp: float) -> Touched: ...
     def points(self) -> np.ndarray: ...
+    def centroids(self, max_points: int | None = None) -> np.ndarray: ...
     def stats(self) -> dict[str, int]: ...
 
 
@@ -234,7 +238,7 @@ class NodeCore:
             stamp=stamp,
             frame=frame,
             generation=self.generation,
-            source=(self.generation, getattr(self.map, "version", None)),
+            source=(self.generation, self.map.version),
             region=region,
             timings=timings,
         )
@@ -242,7 +246,7 @@ class NodeCore:
     def map_cloud(self, max_points: int, seq: int) -> PointCloud | None:
         """The map as a PointCloud in the results' frame: one point per voxel (its points'
         mean; at most ``max_points``, every k-th); None before the first scan."""
-        if self.last_stamp is None or not hasattr(self.map, "centroids"):
+        if self.last_stamp is None:
             return None
         pts = transform_points(self.map.centroids(max_points), self.gravity.rotation)
         frame = self.cfg.frame_id if self.posed else self.frame
@@ -257,13 +261,13 @@ class NodeCore:
             self._last_detect = stamp
         return due
 
-    def _widen_pending(self, touched: Any, rotation: np.ndarray) -> None:
+    def _widen_pending(self, touched: Touched, rotation: np.ndarray) -> None:
         """Add the x, y box (detection frame) of what ``touched`` (map frame) changed."""
         lo, hi = np.asarray(touched.lo, float), np.asarray(touched.hi, float)
         corners = []
         if np.all(lo <= hi):
             corners.append(np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T)
-        removed = np.asarray(getattr(touched, "removed", np.zeros((0, 3))), float)
+        removed = np.asarray(touched.removed, float)
         if len(removed):
             size = float(self.cfg.map.voxel_size)
             rlo, rhi = removed.min(axis=0) * size, (removed.max(axis=0) + 1) * size

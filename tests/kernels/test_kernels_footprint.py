@@ -8,7 +8,7 @@ import scipy.ndimage as ndi
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from supportnode.kernels.footprint import close3, fill_holes, footprint_raster
+from supportnode.kernels.footprint import close3, fill_holes, footprint_raster, label8
 
 
 def _holes_up_to(mask: np.ndarray, max_cells: int) -> np.ndarray:
@@ -66,3 +66,18 @@ def test_footprint_raster_of_points():
         footprint_raster(np.array([np.nan]), np.array([0.0]), (3, 3), 10)
     with pytest.raises(ValueError, match="raster coordinates"):
         footprint_raster(np.array([1.5]), np.array([0.0]), (3, 3), 10)
+
+
+@settings(max_examples=120, deadline=None)
+@given(
+    h=st.integers(1, 30),
+    w=st.integers(1, 30),
+    fill=st.floats(0.0, 1.0),
+    seed=st.integers(0, 10_000),
+)
+def test_labels_match_scipy_numbering_and_all(h, w, fill, seed):
+    mask = np.random.default_rng(seed).random((h, w)) < fill
+    got, n = label8(mask)
+    want, n_want = ndi.label(mask, structure=np.ones((3, 3), bool))
+    assert n == n_want and got.dtype == want.dtype
+    np.testing.assert_array_equal(got, want)

@@ -82,6 +82,8 @@ def claim_raised(
     above ``obj_label``'s."""
     from scipy import ndimage
 
+    from supportnode.kernels.footprint import label8
+
     out = owner.copy()
     q = np.flatnonzero(raised & (out < 0))
     if len(q) == 0:
@@ -93,7 +95,7 @@ def claim_raised(
     qij = np.floor((xyz[q, :2] - lo) / cell).astype(np.int64)
     patch_img = np.zeros(shape, dtype=bool)
     patch_img[qij[:, 0], qij[:, 1]] = True
-    patches, n = ndimage.label(patch_img, structure=np.ones((3, 3)))
+    patches, n = label8(patch_img)
     # The objects' columns near the patches, their points no higher than reach above them.
     top = xyz[q, 2].max() + reach
     near = np.flatnonzero(obj_label >= 0)

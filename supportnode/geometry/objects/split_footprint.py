@@ -20,7 +20,7 @@ from supportnode.geometry.objects.raster import (
     _taxicab_deep,
     _true_box,
 )
-from supportnode.kernels.footprint import footprint_raster
+from supportnode.kernels.footprint import footprint_raster, label8
 
 # A split part must hold at least this fraction of the cluster's footprint cells.
 _SPLIT_MIN_FRACTION = 0.15
@@ -89,7 +89,6 @@ def _split_footprint(
     # a footprint with no cell deep enough for a part (a ring of walls) stops here.
     if not _taxicab_deep(occ, cell, 1.5 * radius):
         return None
-    eight = np.ones((3, 3), dtype=bool)
     n_cells = int(np.count_nonzero(occ))
     depth = _edt_inner(occ, n_cells) - 0.5  # cell centre to footprint edge, cells
     depth[~occ] = 0.0
@@ -108,7 +107,7 @@ def _split_footprint(
         if k in probed:
             comp_box, n = probed[k]
         else:
-            comp_box, n = ndimage.label(depth_box > t, structure=eight)
+            comp_box, n = label8(depth_box > t)
         if n < 2:
             continue
         inside = comp_box > 0
@@ -228,7 +227,7 @@ def _first_level(
     if len(below) < 2:
         return 0, {}
     k = below[-1]
-    comp, n = ndimage.label(depth > levels[k], structure=np.ones((3, 3), dtype=bool))
+    comp, n = label8(depth > levels[k])
     on_k = comp[deep]
     if n < 2 or (on_k == on_k[0]).all():
         return k + 1, {}
