@@ -32,6 +32,29 @@ class Clearing(StoreState):
         """
         size = self.size
         pack_keys(np.floor(origin / size).astype(np.int64)[None])  # range check of the origin
+        u, n, pts = self._sample_rays(cols, origin)
+        # The stored voxels the rays pass through and this scan did not hit (those it hit
+        # are seen, not seen through), each (ray, voxel) once: compiled (kernels.rays).
+        ray, slot = ray_voxels(
+            origin, u, n, size, self._hash.table, _OFFS, _SHIFT_ARR, self._last_scan, self._scans
+        )
+        if len(slot) == 0:
+            return np.zeros((0, 3), np.int64)
+        through = self._through(slot, origin, u[ray], pts[ray])
+        # One decrement per voxel and scan, two when several rays agree (a single ray through
+        # a voxel may be noise; several are a clear view through it).
+        hit_slots, rays_through = np.unique(slot[through], return_counts=True)
+        self._evidence[hit_slots] -= np.where(rays_through >= 3, 2, 1).astype(np.int32)
+        gone = hit_slots[self._evidence[hit_slots] <= 0]
+        self._stats["cleared"] += len(gone)
+        return self._remove(gone)
+
+    def _sample_rays(
+        self, cols: list[np.ndarray], origin: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The clearing rays of a scan (x, y, z columns (N,), map frame) from ``origin`` (3,):
+        unit directions (R, 3), samples per ray (R,) and the rays' hits (R, 3), metres."""
+        size = self.size
         if len(cols[0]) > self.clear_rays:
             pick = self._rng.choice(len(cols[0]), self.clear_rays, replace=False)
             pts = np.stack([c[pick] for c in cols], axis=1)
@@ -51,15 +74,14 @@ class Clearing(StoreState):
         # Rays without samples are dropped (a zero-length one has no direction).
         keep = np.flatnonzero(n)
         n, d, dist, pts = n[keep], d[keep], dist[keep], pts[keep]
-        u = d / dist[:, None]
-        # The stored voxels the rays pass through and this scan did not hit (those it hit
-        # are seen, not seen through), each (ray, voxel) once: compiled (kernels.rays).
-        ray, slot = ray_voxels(
-            origin, u, n, size, self._hash.table, _OFFS, _SHIFT_ARR, self._last_scan, self._scans
-        )
-        if len(slot) == 0:
-            return np.zeros((0, 3), np.int64)
+        return d / dist[:, None], n, pts
 
+    def _through(
+        self, slot: np.ndarray, origin: np.ndarray, uu: np.ndarray, hit: np.ndarray
+    ) -> np.ndarray:
+        """(P,) bool: did each (ray, voxel) pair pass through what the voxel at ``slot`` (P,)
+        holds (see _clear)? uu (P, 3): the ray's direction; hit (P, 3): where it ended, m."""
+        size = self.size
         uniq, inv = np.unique(slot, return_inverse=True)
         corner = self._keys[uniq] * size
         mean, _, normal, planar = _plane_fits(
@@ -67,7 +89,6 @@ class Clearing(StoreState):
         )
         c = (corner + mean)[inv]
         n_ = normal[inv]
-        uu, hit = u[ray], pts[ray]
         tol = self.clear_tolerance
 
         # Planar: crossing point of the ray with the voxel's plane, inside the voxel (+ half a
@@ -87,11 +108,4 @@ class Clearing(StoreState):
         # Sparse or linear (a lidar ring leaves a line of points): the ray went through the
         # voxel (it was sampled in it) and ends clearly above or below it.
         through_other = np.abs(hit[:, 2] - c[:, 2]) >= tol
-        through = np.where(planar[inv], through_planar, through_other)
-        # One decrement per voxel and scan, two when several rays agree (a single ray through
-        # a voxel may be noise; several are a clear view through it).
-        hit_slots, rays_through = np.unique(slot[through], return_counts=True)
-        self._evidence[hit_slots] -= np.where(rays_through >= 3, 2, 1).astype(np.int32)
-        gone = hit_slots[self._evidence[hit_slots] <= 0]
-        self._stats["cleared"] += len(gone)
-        return self._remove(gone)
+        return np.where(planar[inv], through_planar, through_other)

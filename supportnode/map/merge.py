@@ -82,53 +82,73 @@ class Merging(ScanVoxelizer):
         _plane_noise), and a ray of this scan passed through that kept point (see
         _seen_through: a voxel holding two faces shows either from its own side). Fewer
         points, or a line of them (one lidar ring), say nothing."""
-        k = self.keep_points
         n = self._raw_n[slots]
-        cnt = grid.counts
         # The voxels whose points are needed by voxel (_by_voxel): those with free places
-        # (renewed ones are among the candidates, added below).
-        need = n < k
-        had = np.flatnonzero((n > 0) & (cnt >= 4))
+        # (renewed ones are among the candidates, added by _renew_changed).
+        need = n < self.keep_points
+        had = np.flatnonzero((n > 0) & (grid.counts >= 4))
         if len(had):
-            moments = np.take(grid.moments, had, axis=0)
-            count = cnt[had]
-            seen, evals, normal, planar = _plane_fits(
-                count, moments[:, :3], moments[:, 3:], self.size
-            )
-            # Only a plane says where the kept points should lie (not a line: one lidar ring).
-            # Most voxels are planes: the tests below run on all (each voxel's result is its
-            # own), and only the end keeps the planes, rather than gathering them first.
-            s = slots[had]
-            raw = self._raw[s]  # (V, k, 3) float32, relative to the corner like seen
-            # In float64 from the start (what mixing float32 into float64 products does anyway,
-            # once rather than per product), in place.
-            wide = raw.astype(np.float64)
-            dist = wide[:, :, 0] * normal[:, 0, None]
-            dist += wide[:, :, 1] * normal[:, 1, None]
-            dist += wide[:, :, 2] * normal[:, 2, None]
-            dist -= np.einsum("ij,ij->i", seen, normal)[:, None]
-            np.abs(dist, out=dist)
-            dist[np.arange(k)[None, :] >= n[had, None]] = 0.0  # places not filled yet
-            noise = _plane_noise(evals[:, 0], count, planar)
-            tol = np.maximum(0.2 * self.size, 3.5 * noise)
-            # Column by column: numpy reduces the short axis of a (V, k) array several times
-            # slower.
-            most = dist[:, 0].copy()
-            for j in range(1, k):  # keep_points columns
-                np.maximum(most, dist[:, j], out=most)
-            off = np.flatnonzero(planar & (most > tol))
-            # The candidates' rays come from the scan's points in them and their neighbours.
-            pairs = self._neighbour_pairs(grid, packed, had[off])
-            need[pairs[1]] = True
-            grid = self._by_voxel(grid, need)
-            seen_through = self._seen_through(
-                grid, had[off], pairs, raw[off], dist[off], origin, 3.0 * noise[off]
-            )
-            renew = s[off[seen_through]]
-            self._raw_n[renew] = 0
-            self._stats["renewed"] += len(renew)
+            grid = self._renew_changed(grid, packed, slots, had, need, origin)
         else:
             grid = self._by_voxel(grid, need)
+        self._fill_places(grid, slots)
+
+    def _renew_changed(
+        self,
+        grid: _ScanGrid,
+        packed: np.ndarray,
+        slots: np.ndarray,
+        had: np.ndarray,
+        need: np.ndarray,
+        origin: np.ndarray,
+    ) -> _ScanGrid:
+        """Empty the kept points of the scan's voxels ``had`` (indices into ``slots``, voxels
+        with kept points and >= 4 scan points) that this scan shows changed (see
+        _keep_first); marks in ``need`` the voxels whose points that took; returns the grid
+        with points by voxel."""
+        k = self.keep_points
+        n = self._raw_n[slots]
+        moments = np.take(grid.moments, had, axis=0)
+        count = grid.counts[had]
+        seen, evals, normal, planar = _plane_fits(count, moments[:, :3], moments[:, 3:], self.size)
+        # Only a plane says where the kept points should lie (not a line: one lidar ring).
+        # Most voxels are planes: the tests below run on all (each voxel's result is its
+        # own), and only the end keeps the planes, rather than gathering them first.
+        s = slots[had]
+        raw = self._raw[s]  # (V, k, 3) float32, relative to the corner like seen
+        # In float64 from the start (what mixing float32 into float64 products does anyway,
+        # once rather than per product), in place.
+        wide = raw.astype(np.float64)
+        dist = wide[:, :, 0] * normal[:, 0, None]
+        dist += wide[:, :, 1] * normal[:, 1, None]
+        dist += wide[:, :, 2] * normal[:, 2, None]
+        dist -= np.einsum("ij,ij->i", seen, normal)[:, None]
+        np.abs(dist, out=dist)
+        dist[np.arange(k)[None, :] >= n[had, None]] = 0.0  # places not filled yet
+        noise = _plane_noise(evals[:, 0], count, planar)
+        tol = np.maximum(0.2 * self.size, 3.5 * noise)
+        # Column by column: numpy reduces the short axis of a (V, k) array several times
+        # slower.
+        most = dist[:, 0].copy()
+        for j in range(1, k):  # keep_points columns
+            np.maximum(most, dist[:, j], out=most)
+        off = np.flatnonzero(planar & (most > tol))
+        # The candidates' rays come from the scan's points in them and their neighbours.
+        pairs = self._neighbour_pairs(grid, packed, had[off])
+        need[pairs[1]] = True
+        grid = self._by_voxel(grid, need)
+        seen_through = self._seen_through(
+            grid, had[off], pairs, raw[off], dist[off], origin, 3.0 * noise[off]
+        )
+        renew = s[off[seen_through]]
+        self._raw_n[renew] = 0
+        self._stats["renewed"] += len(renew)
+        return grid
+
+    def _fill_places(self, grid: _ScanGrid, slots: np.ndarray) -> None:
+        """Fill each voxel's free kept-point places with evenly spaced picks of the scan's
+        points in it (grid: points by voxel)."""
+        k = self.keep_points
         room = k - self._raw_n[slots]
         sel = np.flatnonzero(room > 0)
         if len(sel) == 0:
