@@ -83,16 +83,15 @@ def _background_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 @njit(cache=True)
-def _fill_holes(mask: np.ndarray, max_cells: int) -> np.ndarray:
-    h, w = mask.shape
-    out = mask.copy()
-    runs, first, n = _background_runs(mask)
-    parent = np.arange(n)
+def _joined(runs: np.ndarray, first: np.ndarray, h: int, diagonal: int) -> np.ndarray:
+    # Union-find parents of the runs (see _background_runs), each run joined to those of the
+    # row above that share a column (diagonal 1: or meet it at a corner, 8-connectivity);
+    # every root is its component's first run.
+    parent = np.arange(first[h])
     for i in range(1, h):
-        # Runs of rows i - 1 and i that share a column are 4-connected.
         a, b = first[i - 1], first[i]
         while a < first[i] and b < first[i + 1]:
-            if runs[a, 1] < runs[b, 2] and runs[b, 1] < runs[a, 2]:
+            if runs[a, 1] < runs[b, 2] + diagonal and runs[b, 1] < runs[a, 2] + diagonal:
                 ra, rb = _find(parent, a), _find(parent, b)
                 if ra != rb:
                     parent[max(ra, rb)] = min(ra, rb)
@@ -100,6 +99,15 @@ def _fill_holes(mask: np.ndarray, max_cells: int) -> np.ndarray:
                 a += 1
             else:
                 b += 1
+    return parent
+
+
+@njit(cache=True)
+def _fill_holes(mask: np.ndarray, max_cells: int) -> np.ndarray:
+    h, w = mask.shape
+    out = mask.copy()
+    runs, first, n = _background_runs(mask)
+    parent = _joined(runs, first, h, 0)  # 4-connected: runs sharing a column
     size = np.zeros(n, np.int64)
     edge = np.zeros(n, np.bool_)
     for r in range(n):
@@ -122,18 +130,7 @@ def _label8(mask: np.ndarray) -> tuple[np.ndarray, int]:
     # is raster order: scipy's numbering.
     h, w = mask.shape
     runs, first, n = _background_runs(~mask)
-    parent = np.arange(n)
-    for i in range(1, h):
-        a, b = first[i - 1], first[i]
-        while a < first[i] and b < first[i + 1]:
-            if runs[a, 1] <= runs[b, 2] and runs[b, 1] <= runs[a, 2]:
-                ra, rb = _find(parent, a), _find(parent, b)
-                if ra != rb:
-                    parent[max(ra, rb)] = min(ra, rb)
-            if runs[a, 2] < runs[b, 2]:
-                a += 1
-            else:
-                b += 1
+    parent = _joined(runs, first, h, 1)
     label = np.zeros(n, np.int32)
     count = 0
     out = np.zeros((h, w), np.int32)
