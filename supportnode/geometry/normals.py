@@ -1,12 +1,14 @@
 """Per-point normals from the covariance of the k nearest neighbours.
 
 One exact k-nearest-neighbour search for all points: through a grid of cells in compiled code
-(`supportnode.kernels.knn`, queries in cell order) for clouds of 16k points and more, else a
+(`supportnode.kernels.knn`, queries in cell order) for clouds of 1k points and more, else a
 k-d tree (in the tree's leaf order, within a search radius estimated from a sample);
 covariances summed over each point's neighbours in compiled code (chunked so memory stays
 bounded), and the closed-form 3x3 eigen solver of :mod:`supportnode.geometry.linalg`. No
-Python loop runs per point. Both searches give the same neighbours, in the same order where
-distances tie: the same normals, bit for bit.
+Python loop runs per point. Both searches give the same neighbours in the same order, so
+the same normals bit for bit, except where distances tie exactly (quantised depth): the grid
+orders ties by row and keeps the lowest rows at the k-th place, the k-d tree as it meets
+them.
 
 The report's optional normal filter (k=30, 160 s on 108k points there) is
 :func:`filter_vertical_normals`, with the report's own suggested improvement: normals are
@@ -37,8 +39,9 @@ _CHUNK_VALUES = 600_000
 # Queries below this are searched on one thread: a k-d tree query of 500 points (k = 10) took
 # 0.65 ms on one thread and 0.88 ms on all (two) cores, which first have to be started.
 _PARALLEL_MIN_QUERIES = 2048
-# Clouds from which the exact search goes through a grid of cells (see _grid).
-_GRID_MIN_POINTS = 16_384
+# Clouds from which the exact search goes through a grid of cells (see _grid): measured
+# faster than the k-d tree from 300 points up (1.5 vs 3.0 ms at 1000 points, k = 30).
+_GRID_MIN_POINTS = 1024
 # Queries from which a search radius is estimated first (see _knn_bound).
 _BOUND_MIN_QUERIES = 16_384
 
@@ -56,7 +59,7 @@ def _as_points(points: np.ndarray, name: str = "points") -> np.ndarray:
 
 
 def normals_at(
-    tree: cKDTree,
+    tree: cKDTree | None,
     points: np.ndarray,
     query: np.ndarray,
     k: int,
@@ -64,7 +67,9 @@ def normals_at(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Unoriented normals and curvature at ``query`` from neighbours among ``points``.
 
-    tree: ``cKDTree(points)``; points: (N, 3) float64 m; query: (M, 3) float64 m.
+    tree: ``cKDTree(points)``, or None to let this choose the search (a grid of cells where
+    `_grid` takes the cloud, else a k-d tree it builds); points: (N, 3) float64 m, finite;
+    query: (M, 3) float64 m, finite. workers: threads of a k-d tree query (-1: all cores).
     Returns ``(normals (M, 3) unit, sign arbitrary; curvature (M,) in [0, 1/3])``.
     """
     m = query.shape[0]
@@ -74,6 +79,11 @@ def normals_at(
     curvature = np.empty(m, dtype=np.float64)
     if m == 0:
         return normals, curvature
+    if tree is None:
+        grid = _grid(points, k)
+        if grid is not None:
+            return _grid_normals_any(grid, query, k)
+        tree = cKDTree(points, balanced_tree=False)  # sliding-midpoint build: 2x faster
     chunk = max(1, _CHUNK_VALUES // k)
     if m < _PARALLEL_MIN_QUERIES:
         workers = 1  # the same neighbours; threads cost more to start than they save here
@@ -170,9 +180,9 @@ def _knn_bound(tree: cKDTree, query: np.ndarray, k: int, workers: int) -> float 
 
 def _grid(pts: np.ndarray, k: int) -> KnnGrid | None:
     """A grid for the exact k-nearest search of (N, 3) points (see `kernels.knn`), its cells
-    0.7 of a typical k-th neighbour distance (measured best on sampled rooms and scans:
-    most queries finish in their own and the next shell of cells); None for small clouds
-    (the k-d tree is as fast) or where the grid would be too large.
+    0.7 of a typical k-th neighbour distance (measured best on sampled rooms and scans,
+    against 0.5-1.4: most queries finish within two shells of cells around their own);
+    None for small clouds (the k-d tree is as fast) or where the grid would be too large.
 
     The typical distance is the median k/8-th neighbour distance, among every 8th point, of
     ~500 evenly spread points: the same radius as the k-th among all, whatever the cloud's
@@ -201,6 +211,30 @@ def _grid_normals(grid: KnnGrid, query: np.ndarray, k: int) -> tuple[np.ndarray,
         idx = grid.query(query[start : start + chunk], k)
         _chunk_normals(c, idx, normals, curvature, start)
     return normals, curvature
+
+
+def _grid_normals_any(grid: KnnGrid, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """`_grid_normals` for (M, 3) queries in any order: searched in cell order (neighbouring
+    queries then read the same cells and moments), returned in theirs."""
+    if query is grid.points:
+        order = grid.sorted_index
+    else:  # the queries' cells as the kernel finds them (clipped to the grid), in order
+        cell = np.floor((query - grid.lo) / grid.size).astype(np.int64)
+        cell = np.clip(cell, 0, grid.dims - 1)
+        key = (cell[:, 0] * grid.dims[1] + cell[:, 1]) * grid.dims[2] + cell[:, 2]
+        order = np.argsort(key, kind="stable")
+    found, curv = _grid_normals(grid, np.take(query, order, axis=0), k)
+    return _unsorted(order, found, curv)
+
+
+def _unsorted(
+    order: np.ndarray, found: np.ndarray, curv: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 3) normals and (M,) curvatures of the queries ``order`` back in input order."""
+    # By a gather (np.take: 3-5x faster than fancy row indexing).
+    rank = np.empty(len(order), dtype=np.intp)
+    rank[order] = np.arange(len(order))  # query number of each input point
+    return np.take(found, rank, axis=0), np.take(curv, rank)
 
 
 def estimate_normals(
@@ -233,11 +267,7 @@ def estimate_normals(
         # unordered clouds. (Sorting the points by a coarse tree first measured no faster.)
         order = tree.indices
         found, curv = normals_at(tree, pts, np.take(pts, order, axis=0), k, workers)
-    # Back to input order by a gather (np.take: 3-5x faster than fancy row indexing).
-    rank = np.empty(len(order), dtype=np.intp)
-    rank[order] = np.arange(len(order))  # query number of each input point
-    normals = np.take(found, rank, axis=0)
-    curvature = np.take(curv, rank)
+    normals, curvature = _unsorted(order, found, curv)
     if viewpoint is not None:
         vp = np.asarray(viewpoint, dtype=np.float64).reshape(3)
         flip = np.einsum("ij,ij->i", normals, vp - pts) < 0

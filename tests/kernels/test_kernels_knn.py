@@ -1,13 +1,17 @@
-"""Exact k nearest neighbours through a grid: against brute force, edge cases, bad input."""
+"""Exact k nearest neighbours through a grid: against brute force, edge cases, threads, bad
+input."""
 
 from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from supportnode.kernels.knn import KnnGrid, knn_grid
+from supportnode.kernels import runtime
+from supportnode.kernels.knn import KnnGrid, _warm, knn_grid
 
 
 def _brute(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:
@@ -28,11 +32,15 @@ def _brute(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:
     size=st.sampled_from([0.02, 0.07, 0.3, 5.0]),
     offset=st.sampled_from([0.0, 1e4]),
     dupes=st.booleans(),
+    lattice=st.booleans(),
     seed=st.integers(0, 10_000),
 )
-def test_same_neighbours_as_brute_force(n, m, k_frac, size, offset, dupes, seed):
+def test_same_neighbours_as_brute_force(n, m, k_frac, size, offset, dupes, lattice, seed):
     rng = np.random.default_rng(seed)
-    pts = rng.uniform(-1, 1, (n, 3)) + offset
+    pts = rng.uniform(-1, 1, (n, 3))
+    if lattice:  # quantised coordinates, as depth images give: many equal distances
+        pts = np.round(pts * 4) / 4
+    pts += offset
     if dupes:
         pts[n // 2 :] = pts[: n - n // 2]  # every point twice: ties broken by row
     own = min(m // 2, n)  # some queries are points of the cloud, the others anywhere near
@@ -69,3 +77,32 @@ def test_a_grid_too_large_is_declined_and_bad_input_refused():
         grid.query(pts, 4)
     with pytest.raises(ValueError, match="finite"):
         grid.query(np.array([[np.inf, 0.0, 0.0]]), 1)
+
+
+def test_k_equal_to_n_empty_query_and_queries_far_outside():
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(0, 1, (40, 3))
+    grid = KnnGrid.build(pts, 0.1)
+    assert grid is not None
+    np.testing.assert_array_equal(grid.query(pts, 40), _brute(pts, pts, 40))  # k = n
+    assert grid.query(np.empty((0, 3)), 5).shape == (0, 5)
+    far = np.array([[50.0, 0.5, 0.5], [-3.0, -3.0, 9.0], [0.5, 0.5, 0.5]])
+    np.testing.assert_array_equal(grid.query(far, 7), _brute(pts, far, 7))
+
+
+def test_two_python_threads_query_at_once():
+    """The parallel kernel runs under the project's thread-safe layer (runtime.configure)."""
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(0, 1, (3000, 3))
+    grid = KnnGrid.build(pts, 0.08)
+    assert grid is not None
+    want = grid.query(pts, 12)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        got = list(pool.map(lambda _: grid.query(pts, 12), range(6)))
+    for g in got:
+        np.testing.assert_array_equal(g, want)
+
+
+def test_warm_up_is_registered():
+    assert _warm in runtime._WARMERS
+    runtime.warm(["knn"])
