@@ -257,9 +257,7 @@ def estimate_normals(
         raise InputError(f"k must be at least 3 for a plane fit, got {k}")
     grid = _grid(pts, k)
     if grid is not None:
-        # Queries in cell order: neighbouring queries read the same cells and moments.
-        order = grid.sorted_index
-        found, curv = _grid_normals(grid, np.take(pts, order, axis=0), k)
+        normals, curvature = _grid_normals_any(grid, pts, k)
     else:
         tree = cKDTree(pts, balanced_tree=False)  # sliding-midpoint build: 2x faster
         # Query in the tree's leaf order: neighbouring queries then touch the same nodes and
@@ -267,7 +265,7 @@ def estimate_normals(
         # unordered clouds. (Sorting the points by a coarse tree first measured no faster.)
         order = tree.indices
         found, curv = normals_at(tree, pts, np.take(pts, order, axis=0), k, workers)
-    normals, curvature = _unsorted(order, found, curv)
+        normals, curvature = _unsorted(order, found, curv)
     if viewpoint is not None:
         vp = np.asarray(viewpoint, dtype=np.float64).reshape(3)
         flip = np.einsum("ij,ij->i", normals, vp - pts) < 0

@@ -7,7 +7,7 @@ each query visits the shells of cells around its own (Chebyshev radius 0, 1, 2, 
 its k-th best distance lies within the radius the visited cells guarantee: the same
 neighbours as any exact search. Cells are numbered z fastest, so a column of cells is one
 run of sorted points, and a column farther than the k-th best found is skipped whole. Clouds
-whose cell grid would not fit in memory are left to the k-d tree (`knn_grid` returns None).
+whose cell grid would not fit in memory are left to the k-d tree (`KnnGrid.build` returns None).
 """
 
 from __future__ import annotations
@@ -245,13 +245,9 @@ class KnnGrid:
             return _query(qry, int(k), *grid)
 
 
-def knn_grid(points: np.ndarray, query: np.ndarray, k: int, size: float) -> np.ndarray | None:
-    """`KnnGrid.build(points, size).query(query, k)`; None when the grid would be too large."""
-    grid = KnnGrid.build(points, size)
-    return None if grid is None else grid.query(query, k)
-
-
 @warmer
 def _warm() -> None:
     pts = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.2, 0.3]])
-    knn_grid(pts, pts, 2, 0.1)
+    grid = KnnGrid.build(pts, 0.1)
+    assert grid is not None
+    grid.query(pts, 2)

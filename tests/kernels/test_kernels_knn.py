@@ -11,7 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from supportnode.kernels import runtime
-from supportnode.kernels.knn import KnnGrid, _warm, knn_grid
+from supportnode.kernels.knn import KnnGrid, _warm
+
+
+def knn_grid(points: np.ndarray, query: np.ndarray, k: int, size: float) -> np.ndarray | None:
+    """The k nearest rows of each query through a grid of ``size`` cells; None: declined."""
+    grid = KnnGrid.build(points, size)
+    return None if grid is None else grid.query(query, k)
 
 
 def _brute(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:

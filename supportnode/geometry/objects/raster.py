@@ -1,5 +1,5 @@
-"""2-D bool raster operations of the footprint splits and the support look-up: hole filling,
-3 x 3 closing (both compiled, in `supportnode.kernels.footprint`), taxicab depth test, bounding box of the set cells and the
+"""2-D bool raster operations of the footprint splits (hole filling, 3 x 3 closing and
+labelling are compiled, in `supportnode.kernels.footprint`): taxicab depth test, bounding box of the set cells and the
 Euclidean distance transform.
 
 Rasters are (H, W) bool arrays, True = occupied; distances are in cells. Each function gives
@@ -12,25 +12,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from supportnode.kernels.footprint import close3, fill_holes
-
 # _edt_inner works on the occupied cells only of rasters of at least this many cells, at most
 # _EDT_SPARSE_MAX_FILL of them occupied (a ring of walls: 2-4 %); scipy's on the rest.
 _EDT_SPARSE_MIN_CELLS = 16_384
 _EDT_SPARSE_MAX_FILL = 0.125
-
-
-def _fill_holes(mask: np.ndarray, max_cells: int | None = None) -> np.ndarray:
-    """``ndimage.binary_fill_holes(mask)`` for a 2-D mask (one compiled flood fill, see
-    `supportnode.kernels.footprint`); with ``max_cells``, only holes of at most that many
-    cells are filled."""
-    return fill_holes(mask, max_cells)
-
-
-def _close3(mask: np.ndarray) -> np.ndarray:
-    """``ndimage.binary_closing(mask, np.ones((3, 3)))`` of a 2-D bool mask (outside = empty),
-    compiled (see `supportnode.kernels.footprint`)."""
-    return close3(mask)
 
 
 def _taxicab_deep(mask: np.ndarray, cell: float, limit: float) -> bool:

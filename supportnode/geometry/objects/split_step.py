@@ -12,7 +12,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from supportnode.geometry.objects.arrays import _col
-from supportnode.geometry.objects.raster import _close3, _fill_holes
+from supportnode.kernels.footprint import close3, fill_holes
 
 # Splitting at a step of the top height (see _split_step), metres and fractions: raster cell
 # = voxel_size; neighbouring cells whose tops differ by at most _STEP_LINK are one plateau;
@@ -60,7 +60,7 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     # the levels nor the free space around them can be judged: such clusters are not tried.
     occupied = np.zeros((h + 2, w + 2), dtype=bool)  # np.pad(..., 1), without its overhead
     occupied[1:-1, 1:-1] = np.isfinite(grid)
-    solid = _fill_holes(_close3(occupied))
+    solid = fill_holes(close3(occupied))
     if len(cells) < _STEP_DENSE * solid.sum():
         return None, False
     plateau = _plateaus(grid, cells)

@@ -17,8 +17,8 @@ import numpy as np
 from scipy import ndimage
 
 from supportnode.geometry.objects.arrays import _percentile
-from supportnode.geometry.objects.raster import _fill_holes
 from supportnode.geometry.surfaces import Surface
+from supportnode.kernels.footprint import fill_holes
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
 _BOTTOM_BAND = 0.02
@@ -167,7 +167,7 @@ class _SupportLookup:
         mask[rel[:, 0], rel[:, 1]] = True
         if surface.band[0] > 0:  # one depth camera's view: the shadows are its
             mask = _close_notches(mask, self.cell)
-        mask = _fill_holes(mask)
+        mask = fill_holes(mask)
         if dilate:
             mask = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool))
         self.mask = mask
