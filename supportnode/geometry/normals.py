@@ -59,7 +59,7 @@ def _as_points(points: np.ndarray, name: str = "points") -> np.ndarray:
 
 
 def normals_at(
-    tree: cKDTree | None,
+    tree: cKDTree,
     points: np.ndarray,
     query: np.ndarray,
     k: int,
@@ -67,9 +67,8 @@ def normals_at(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Unoriented normals and curvature at ``query`` from neighbours among ``points``.
 
-    tree: ``cKDTree(points)``, or None to let this choose the search (a grid of cells where
-    `_grid` takes the cloud, else a k-d tree it builds); points: (N, 3) float64 m, finite;
-    query: (M, 3) float64 m, finite. workers: threads of a k-d tree query (-1: all cores).
+    tree: ``cKDTree(points)``; points: (N, 3) float64 m; query: (M, 3) float64 m.
+    workers: threads of the k-d tree query (-1: all cores).
     Returns ``(normals (M, 3) unit, sign arbitrary; curvature (M,) in [0, 1/3])``.
     """
     m = query.shape[0]
@@ -79,11 +78,6 @@ def normals_at(
     curvature = np.empty(m, dtype=np.float64)
     if m == 0:
         return normals, curvature
-    if tree is None:
-        grid = _grid(points, k)
-        if grid is not None:
-            return _grid_normals_any(grid, query, k)
-        tree = cKDTree(points, balanced_tree=False)  # sliding-midpoint build: 2x faster
     chunk = max(1, _CHUNK_VALUES // k)
     if m < _PARALLEL_MIN_QUERIES:
         workers = 1  # the same neighbours; threads cost more to start than they save here

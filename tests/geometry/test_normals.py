@@ -132,26 +132,23 @@ def test_grid_search_gives_the_k_d_trees_normals_bit_for_bit(monkeypatch: pytest
     np.testing.assert_array_equal(kept, mod.filter_vertical_normals(pts, mask))
 
 
-def test_normals_at_without_a_tree_matches_the_k_d_tree():
-    """``normals_at(None, ...)`` (the gravity estimator's call) searches through a grid of
-    cells: the same normals and curvature as with a tree, for the points themselves and for
-    queries in any order; small clouds go to a k-d tree of its own."""
+def test_grid_normals_of_queries_in_any_order_match_the_k_d_tree():
+    """Through a grid of cells, queries in any order (not only the cloud's own points, far
+    from the origin as in a map frame) get the k-d tree's normals and curvature; clouds too
+    small for a grid are left to the tree."""
     from scipy.spatial import cKDTree
 
     from supportnode.geometry import normals as mod
 
     rng = np.random.default_rng(6)
     walls = [_plane(rng, 3000, rng.normal(size=3), rng.uniform(-1, 1, 3)) for _ in range(3)]
-    pts = np.concatenate(walls) + 1e3  # far from the origin, as a map frame may be
-    assert mod._grid(pts, 20) is not None
+    pts = np.concatenate(walls) + 1e3
+    grid = mod._grid(pts, 20)
+    assert grid is not None
     tree = cKDTree(pts)
     for query in (pts, pts[rng.permutation(len(pts))[:2000]] + rng.normal(0, 0.01, (2000, 3))):
-        got = mod.normals_at(None, pts, query, 20)
+        got = mod._grid_normals_any(grid, query, 20)
         want = mod.normals_at(tree, pts, query, 20)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
-    few = pts[:100]
-    assert mod._grid(few, 20) is None
-    got = mod.normals_at(None, few, few, 20)
-    np.testing.assert_array_equal(got[0], mod.normals_at(cKDTree(few), few, few, 20)[0])
-    assert mod.normals_at(None, pts, np.empty((0, 3)), 20)[0].shape == (0, 3)
+    assert mod._grid(pts[:100], 20) is None

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from supportnode.errors import AlignmentError, InputError
 from supportnode.geometry.gravity.choice import choose_up, fmt_vector
@@ -27,12 +28,6 @@ from supportnode.geometry.gravity.families import (
     refine_axis,
 )
 from supportnode.geometry.normals import normals_at
-
-# The kernels normals_at runs here (it imports them when first called): imported with this
-# module so runtime.warm, which warms the kernel modules imported, readies them before a
-# node's first scan.
-from supportnode.kernels import knn as _knn  # noqa: F401
-from supportnode.kernels import neighbourhoods as _neighbourhoods  # noqa: F401
 from supportnode.kernels.downsample import voxel_moments
 from supportnode.params import GravityParams
 
@@ -131,9 +126,7 @@ def estimate_gravity(
         if hint is not None:
             return _from_hint(hint, None, params, what)
         raise AlignmentError(f"no horizontal surface in view: {what}; {_ADVICE}")
-    # No tree: normals_at searches through a grid of cells where that pays, else through a
-    # k-d tree of its own.
-    normals, curvature = normals_at(None, ds, ds, _K)
+    normals, curvature = normals_at(cKDTree(ds), ds, ds, _K)
     planar = np.flatnonzero(curvature < _MAX_CURVATURE)
     min_support = max(_MIN_FAMILY_POINTS, int(np.ceil(_MIN_FAMILY_FRACTION * ds.shape[0])))
     fams, best = find_families(normals, planar, params.inlier_angle_deg, min_support)
