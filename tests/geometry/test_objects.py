@@ -7,9 +7,10 @@ import json
 
 import numpy as np
 import pytest
+from scipy.spatial import ConvexHull
 
 from supportnode.errors import InputError
-from supportnode.geometry.objects import detect_objects
+from supportnode.geometry.objects import describe_objects, detect_objects, segment_objects
 from supportnode.geometry.surfaces import Surface, SurfaceResult, detect_surfaces
 from supportnode.params import ObjectParams
 
@@ -410,18 +411,17 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     lab = rng.integers(-1, 300, 5000)
     np.testing.assert_array_equal(arrays._group_by_label(lab), np.argsort(lab, kind="stable"))
 
-    # Points on vertical lines: dropping the inner ones keeps the hull and its volume.
+    # Points on vertical lines: dropping the inner ones keeps the hull's volume.
     xy = rng.uniform(0, 1, (300, 2))
     p = np.c_[np.repeat(xy, 10, axis=0), rng.uniform(0, 1, 3000)]
     keep = hull._column_ends(p)
     assert keep.sum() <= 600
     lo, hi = p.min(axis=0), p.max(axis=0)
     monkeypatch.setattr(hull, "_COLUMN_DEDUPE_MIN", 10**9)
-    ref_fp, ref_vol = hull._hulls(p, lo, hi)
+    ref_vol = hull._volume(p, lo, hi)
     monkeypatch.setattr(hull, "_COLUMN_DEDUPE_MIN", 1)
-    fp, vol = hull._hulls(p, lo, hi)
-    assert vol == pytest.approx(ref_vol, rel=1e-12)
-    assert sorted(map(tuple, fp)) == sorted(map(tuple, ref_fp))
+    assert hull._volume(p, lo, hi) == pytest.approx(ref_vol, rel=1e-12)
+    assert ref_vol == pytest.approx(ConvexHull(p).volume, rel=1e-12)
 
     # Support look-up in one pass == surface by surface; dense voxel ids == sorted keys.
     surfaces = [
@@ -443,24 +443,31 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
 
 
 def test_footprints_without_volumes_are_the_same_polygons():
-    """The node's describe (no 3-D hulls) gives the offline footprints, vertex for vertex."""
-    from supportnode.geometry.objects.hull import _hulls
-
+    """The node's describe (no 3-D hulls) gives the offline footprints and boxes, vertex for
+    vertex: the exact hull of all of each cluster's points, from its lowest x, y."""
     rng = np.random.default_rng(3)
     lines = rng.uniform(0, 1, (200, 2))
     clouds = [
-        rng.normal(0, 0.1, (5000, 3)),  # sampled down to _HULL_MAX_POINTS first
-        np.c_[np.repeat(lines, 20, axis=0), rng.uniform(0, 1, 4000)],  # lidar columns
-        box((0.0, 0.0, 0.0), (0.3, 0.2, 0.1)),
-        np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]),  # too few for a 3-D hull
+        rng.normal(0, 0.1, (5000, 3)),  # dense: its 3-D hull from a sample, not its footprint
+        np.c_[np.repeat(lines, 20, axis=0), rng.uniform(0, 1, 4000)] + [3, 0, 0],  # columns
+        box((0.0, 0.0, 0.0), (0.3, 0.2, 0.1)) + [0, 3, 0],
     ]
-    for p in clouds:
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        footprint, volume = _hulls(p, lo, hi)
-        fast, no_volume = _hulls(p, lo, hi, volume=False)
-        np.testing.assert_array_equal(fast, footprint)
-        assert np.isnan(no_volume) and volume >= 0.0
-        assert (fast[0] == np.min(fast[fast[:, 0] == fast[:, 0].min()], axis=0)).all()
+    pts = np.concatenate(clouds)
+    floor = make_surface(0, -0.5, -2, 5, -2, 5)
+    seg = segment_objects(pts, SurfaceResult([floor], np.full(len(pts), -1, np.int32)))
+    offline = describe_objects(seg)
+    node = describe_objects(seg, volumes=False)
+    assert len(offline.clusters) >= 3 and offline.clusters[0].point_count > 4000
+    for a, b in zip(offline.clusters, node.clusters, strict=True):
+        np.testing.assert_array_equal(a.footprint, b.footprint)
+        assert a.obb_yaw == b.obb_yaw and np.isnan(b.volume) and a.volume >= 0
+        mine = pts[offline.labels == a.id]
+        if len(a.footprint) < 3:
+            continue  # a line: Qhull refuses it
+        ref = ConvexHull(mine[:, :2])
+        assert sorted(map(tuple, a.footprint)) == sorted(map(tuple, mine[ref.vertices, :2]))
+        lowest = a.footprint[a.footprint[:, 0] == a.footprint[:, 0].min()]
+        assert (a.footprint[0] == lowest.min(axis=0)).all()
 
 
 def barrel_triangle(r: float = 0.06, step: float = 0.005) -> np.ndarray:
@@ -533,8 +540,8 @@ def test_walls_around_two_rooms_are_not_cut_at_the_doorway(rng):
 
 def test_memo_gives_the_same_clusters_and_reuses_the_unchanged_ones(table_scene):
     """The node's map changes in a few places per scan: with a memo, the clusters whose points
-    did not change take their hulls and splits from the previous call, and every result is
-    what a call without it gives. Its results are read-only (shared between calls)."""
+    did not change take their volumes and splits from the previous call, and every result is
+    what a call without it gives."""
     from supportnode.geometry.memo import Memo
 
     pts, surf, _ = table_scene
@@ -554,10 +561,9 @@ def test_memo_gives_the_same_clusters_and_reuses_the_unchanged_ones(table_scene)
         assert with_memo.stats["merged_splits"] == plain.stats["merged_splits"]
         counts.append((memo.hits - before[0], memo.misses - before[1]))
     (_, boxes), (kept, lifted_box), (_, both), (again, none) = counts
-    assert kept >= 2 and 0 < lifted_box < boxes  # the lifted box (its hull, maybe its split)
-    assert none == 0 and again == both >= 3  # the barrels' split and both hulls
+    assert kept >= 2 and 0 < lifted_box < boxes  # the lifted box (its volume, maybe its split)
+    assert none == 0 and again == both >= 3  # the barrels' split and both volumes
     assert plain.stats["merged_splits"] == 1
-    assert not with_memo.clusters[0].footprint.flags.writeable
 
 
 def test_split_objects_finds_again_only_the_surfaces_of_split_clusters():

@@ -8,18 +8,20 @@ supported_by.
 from __future__ import annotations
 
 import functools
+import itertools
 
 import numpy as np
 
 from supportnode.geometry.memo import Memo
-from supportnode.geometry.objects.hull import _hulls, _oriented_rects
+from supportnode.geometry.objects.hull import _oriented_rects, _volume
 from supportnode.geometry.objects.result import Cluster, Segmentation
 from supportnode.geometry.objects.support import supported_by
+from supportnode.kernels.hull import footprint_hulls
 
 
 def _describe(seg: Segmentation, memo: Memo | None = None, volumes: bool = True) -> list[Cluster]:
-    """Hulls, oriented boxes and heights of the clusters of seg, in its order; volumes False:
-    no convex-hull volumes (NaN), see _hulls."""
+    """Footprints (exact x, y convex hulls), oriented boxes and heights of the clusters of
+    seg, in its order; volumes False: no convex-hull volumes (NaN, no 3-D hulls taken)."""
     if len(seg.surface_ids) == 0:
         return []
     runs = seg._runs.tolist()
@@ -28,19 +30,21 @@ def _describe(seg: Segmentation, memo: Memo | None = None, volumes: bool = True)
     # rows (see _make_cluster).
     rows = np.ascontiguousarray(seg._grouped.T)
     lo, hi = seg.bbox_min, seg.bbox_max  # bounding boxes: the same min / max as per cluster
-    if memo is None:
-        hulls = [_hulls(p, lo[cid], hi[cid], volumes) for cid, p in enumerate(groups)]
+    rows_of, ring = footprint_hulls(seg._grouped, seg._runs[:, 0], seg._runs[:, 1])
+    corners = seg._grouped[rows_of, :2]  # every ring's vertices, gathered once
+    footprints = [corners[a:b] for a, b in _pairs(ring)]
+    if not volumes:
+        volume = [float("nan")] * len(groups)
+    elif memo is None:
+        volume = [_volume(p, lo[cid], hi[cid]) for cid, p in enumerate(groups)]
     else:  # lo, hi are p's own bounds: a pure function of p
-        hulls = [
-            memo.get(
-                "hull" if volumes else "footprint",
-                p,
-                functools.partial(_hulls, p, lo[cid], hi[cid], volumes),
-            )
+        volume = [
+            memo.get("volume", p, functools.partial(_volume, p, lo[cid], hi[cid]))
             for cid, p in enumerate(groups)
         ]  # per cluster
+    hulls = list(zip(footprints, volume, strict=True))
     # The hulls, never the raw points: the edge search is quadratic in the vertices.
-    rects = _oriented_rects([footprint for footprint, _ in hulls])
+    rects = _oriented_rects(footprints)
     return [
         _make_cluster(
             cid,
@@ -58,6 +62,11 @@ def _describe(seg: Segmentation, memo: Memo | None = None, volumes: bool = True)
     ]
 
 
+def _pairs(starts: np.ndarray) -> list[tuple[int, int]]:
+    """(start, end) of each run of starts (C + 1,)."""
+    return list(itertools.pairwise(starts.tolist()))
+
+
 def _make_cluster(
     cid: int,
     rows: np.ndarray,
@@ -71,7 +80,7 @@ def _make_cluster(
     """Properties of one cluster standing on surface sid (heights by surface id).
 
     rows: the cluster's points transposed (3, P), C-contiguous; lo, hi: (3,) their bounding
-    box; hull: footprint and volume (see _hulls); rect: oriented box of the footprint (see
+    box; hull: footprint (K, 2) and volume (m^3, NaN: not taken); rect: oriented box of the footprint (see
     _oriented_rect).
     """
     base = height_of[sid] if sid is not None else lo[2]

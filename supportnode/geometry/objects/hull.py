@@ -1,5 +1,5 @@
-"""Shape of one cluster's points: x, y footprint (convex hull, counter-clockwise), convex-hull
-volume and the yaw-only minimum-area box of the footprint.
+"""Shape of one cluster's points: convex-hull volume and the yaw-only minimum-area box of its
+footprint (the footprints themselves: `supportnode.kernels.hull`).
 
 Points p (P, 3) float64 metres, z up; footprints (K, 2) float64; volumes m^3; yaw radians in
 (-pi/2, pi/2], the direction of the box's length axis.
@@ -16,38 +16,20 @@ _COLUMN_DEDUPE_MIN = 1000
 # Footprints of up to this many vertices get their oriented boxes in one batch (see
 # _oriented_rects), padded to the largest: at most 64 x 64 directions x vertices per cluster.
 _RECT_BATCH_MAX = 64
-# Clusters of more points than this take their hull from an even sample (see _hulls).
+# Clusters of more points than this take their 3-D hull from an even sample (see
+# _hull_candidates).
 _HULL_MAX_POINTS = 3000
 # Odd 64-bit multipliers (golden ratio and a splitmix64 constant) hashing x, y bit patterns.
 _HASH_X = np.uint64(0x9E3779B97F4A7C15)
 _HASH_Y = np.uint64(0xBF58476D1CE4E5B9)
 
 
-def _hulls(
-    p: np.ndarray, lo: np.ndarray, hi: np.ndarray, volume: bool = True
-) -> tuple[np.ndarray, float]:
-    """x, y footprint (K, 2) (see _hull_2d) and convex-hull volume (m^3) of p (P, 3).
-
-    lo, hi: (3,) bounding box of p. The footprint is the 2-D hull of the 3-D hull's vertices
-    only: projecting a convex hull gives the hull of the projected vertices, and the 3-D hull
-    has a few dozen vertices where a wall cluster has 80k points. volume False: the footprint
-    straight from the 2-D hull of the same points (the same polygon, for a third of the
-    time: the node's messages carry no volume) and a volume of NaN.
-    """
-    if not (hi[:2] > lo[:2]).all():
-        # All on one line x = c or y = c (a wall strip seen edge-on): what _hull_2d returns
-        # for collinear sets, its two ends in sorted order (or the one point), without the
-        # failed Qhull call and the sort of all points.
-        ends = np.array([lo[:2], hi[:2]])
-        footprint = ends[:1] if (ends[0] == ends[1]).all() else ends
-        return footprint, (0.0 if volume else float("nan"))  # flat: no volume
+def _volume(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    """Convex-hull volume (m^3) of p (P, 3) with bounding box lo, hi (3,); 0 when flat."""
     # A set flat along an axis has no volume; Qhull would raise (slowly) on it.
-    solid = len(p) >= 4 and (hi > lo).all()
-    q = _hull_candidates(p) if solid else p
-    if not volume:
-        return _hull_2d(q[:, :2]), float("nan")
-    vol, verts = _hull_3d(q) if solid else (0.0, None)
-    return _hull_2d(p[:, :2] if verts is None else verts[:, :2]), vol
+    if len(p) < 4 or not (hi > lo).all():
+        return 0.0
+    return _hull_3d(_hull_candidates(p))
 
 
 def _hull_candidates(p: np.ndarray) -> np.ndarray:
@@ -63,18 +45,12 @@ def _hull_candidates(p: np.ndarray) -> np.ndarray:
     return q
 
 
-def _hull_3d(q: np.ndarray) -> tuple[float, np.ndarray | None]:
-    """Volume (m^3) and vertices (V, 3) of the convex hull of q (Q, 3); 0 and None when Qhull
-    finds it degenerate."""
+def _hull_3d(q: np.ndarray) -> float:
+    """Volume (m^3) of the convex hull of q (Q, 3); 0 when Qhull finds it degenerate."""
     try:
-        hull = ConvexHull(q)
+        return float(ConvexHull(q).volume)
     except (QhullError, ValueError):
-        return 0.0, None
-    # hull.vertices is np.unique(hull.simplices): a mask keeps the same rows in the same
-    # (input) order without the sort.
-    used = np.zeros(len(q), dtype=bool)
-    used[hull.simplices] = True
-    return float(hull.volume), np.compress(used, q, axis=0)
+        return 0.0
 
 
 def _oriented_rect(xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
@@ -191,21 +167,3 @@ def _column_ends(p: np.ndarray) -> np.ndarray:
     keep = np.empty(len(p), dtype=bool)
     keep[order] = ~inner
     return keep
-
-
-def _hull_2d(xy: np.ndarray) -> np.ndarray:
-    """Convex hull (K, 2) of xy, counter-clockwise; the distinct points for degenerate sets."""
-    try:
-        hull = ConvexHull(xy)
-    except (QhullError, ValueError):
-        uniq = np.unique(xy, axis=0)
-        if len(uniq) <= 2:
-            return uniq
-        # Collinear: the two extreme points along the line.
-        d = uniq - uniq[0]
-        t = d @ (d[np.argmax((d**2).sum(axis=1))])
-        return uniq[[np.argmin(t), np.argmax(t)]]
-    ring = hull.vertices  # scipy gives 2-D hull vertices counter-clockwise
-    # From the lowest x (then y): the same ring whatever points Qhull was given.
-    first = np.lexsort((xy[ring, 1], xy[ring, 0]))[0]
-    return xy[np.roll(ring, -first)]

@@ -1,0 +1,232 @@
+"""Convex hulls of the x, y footprints of many clusters in one compiled pass.
+
+Qhull costs ~0.1 ms a call before it starts, and a map has some 50 clusters a detection; its
+input first had to be thinned (the ends of vertical lines, an even sample of dense clusters).
+Here each cluster's points are filtered by the octagon of its extreme points (Akl-Toussaint:
+a point strictly inside a polygon of hull points is no hull vertex), the rest sorted and
+chained (Andrew's monotone chain): the exact hull of all the points, in one call for all.
+
+Rings are counter-clockwise, without collinear vertices, starting at the lowest x (then y);
+a cluster whose points are all on a line gives its two ends (lowest first), one point gives
+itself: as Qhull with its degenerate cases handled, on points in general position.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from supportnode.kernels.runtime import warmer
+
+__all__ = ["footprint_hulls"]
+
+# Clusters with more points than this outside their octagon are thinned by the hull of an
+# even sample of about _SAMPLE of them first.
+_SAMPLE_ABOVE = 4096
+_SAMPLE = 1024
+# Relative round-off below which three points are on one line (see _turns_left).
+_COLLINEAR = 1e-12
+# Directions whose extreme points make the filtering octagon, counter-clockwise from -x.
+_DIRS = np.array(
+    [
+        [-1.0, 0.0],
+        [-1.0, -1.0],
+        [0.0, -1.0],
+        [1.0, -1.0],
+        [1.0, 0.0],
+        [1.0, 1.0],
+        [0.0, 1.0],
+        [-1.0, 1.0],
+    ]
+)
+
+
+@njit(cache=True)
+def _cross(ox: float, oy: float, ax: float, ay: float, bx: float, by: float) -> float:
+    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
+
+
+@njit(cache=True)
+def _turns_left(ox: float, oy: float, ax: float, ay: float, bx: float, by: float) -> bool:
+    # o -> a -> b turns left by more than round-off: points on one line up to the last bits
+    # of their coordinates (decimal data: 0.013, 0.104, 1.105) are collinear, as for Qhull.
+    ux, uy, vx, vy = ax - ox, ay - oy, bx - ox, by - oy
+    return ux * vy - uy * vx > _COLLINEAR * (abs(ux) + abs(uy)) * (abs(vx) + abs(vy))
+
+
+@njit(cache=True)
+def _survivors(x: np.ndarray, y: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    # Indices of the points not strictly inside the octagon of the extreme points along dirs
+    # (taken in counter-clockwise order, so the octagon's vertices are in that order too).
+    n = len(x)
+    ex = np.zeros(8, np.int64)
+    best = np.full(8, -np.inf)
+    for i in range(n):  # all eight extremes in one pass
+        for d in range(8):
+            v = dirs[d, 0] * x[i] + dirs[d, 1] * y[i]
+            if v > best[d]:
+                best[d] = v
+                ex[d] = i
+    keep = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        inside = True
+        edges = 0
+        for d in range(8):
+            a, b = ex[d], ex[(d + 1) % 8]
+            if x[a] == x[b] and y[a] == y[b]:
+                continue  # repeated vertex: no edge
+            edges += 1
+            if _cross(x[a], y[a], x[b], y[b], x[i], y[i]) <= 0.0:
+                inside = False
+                break
+        if not inside or edges < 3:
+            keep[m] = i
+            m += 1
+    return keep[:m]
+
+
+@njit(cache=True)
+def _chain(x: np.ndarray, y: np.ndarray, idx: np.ndarray, ring: np.ndarray) -> int:
+    # Andrew's monotone chain over the points idx (sorted by x, then y); writes the ring's
+    # point indices into ring (room for 2 * len(idx) + 1), returns its length.
+    k = 0
+    for t in range(len(idx)):  # lower chain, left to right
+        i = idx[t]
+        while k >= 2 and not _turns_left(
+            x[ring[k - 2]], y[ring[k - 2]], x[ring[k - 1]], y[ring[k - 1]], x[i], y[i]
+        ):
+            k -= 1
+        ring[k] = i
+        k += 1
+    low = k + 1
+    for t in range(len(idx) - 2, -1, -1):  # upper chain, right to left
+        i = idx[t]
+        while k >= low and not _turns_left(
+            x[ring[k - 2]], y[ring[k - 2]], x[ring[k - 1]], y[ring[k - 1]], x[i], y[i]
+        ):
+            k -= 1
+        ring[k] = i
+        k += 1
+    k -= 1  # the last point is the first again
+    if k == 2 and x[ring[0]] == x[ring[1]] and y[ring[0]] == y[ring[1]]:
+        k = 1  # every point the same
+    return max(k, 1)
+
+
+@njit(cache=True)
+def _sorted_hull(x: np.ndarray, y: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    # The ring (point indices) of the points cand, chained in x, then y order: a stable sort by
+    # y, then a stable one by x.
+    cand = cand[np.argsort(y[cand], kind="mergesort")]
+    cand = cand[np.argsort(x[cand], kind="mergesort")]
+    ring = np.empty(2 * len(cand) + 1, np.int64)
+    return ring[: _chain(x, y, cand, ring)]
+
+
+@njit(cache=True)
+def _last_at_most(xs: np.ndarray, v: float, descending: bool) -> int:
+    # The last index whose xs (ascending, or descending) is <= v (> v when descending).
+    lo, hi = 0, len(xs) - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if (xs[mid] > v) if descending else (xs[mid] <= v):
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@njit(cache=True)
+def _outside(x: np.ndarray, y: np.ndarray, cand: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    # The points of cand not strictly inside the convex ring (counter-clockwise from the
+    # lowest x, then y; at least 3 vertices): their x between its ends, above its lower chain
+    # and below its upper one, each edge found by a binary search on x.
+    k = len(ring)
+    r = 0  # the ring's rightmost (then highest) vertex ends the lower chain
+    for t in range(k):
+        i, j = ring[t], ring[r]
+        if x[i] > x[j] or (x[i] == x[j] and y[i] > y[j]):
+            r = t
+    lower = ring[: r + 1]
+    upper = np.empty(k - r + 1, np.int64)
+    upper[: k - r] = ring[r:]
+    upper[k - r] = ring[0]
+    lx, ux = x[lower], x[upper]
+    x_lo, x_hi = lx[0], lx[-1]
+    keep = np.empty(len(cand), np.int64)
+    m = 0
+    for t in range(len(cand)):
+        i = cand[t]
+        px, py = x[i], y[i]
+        inside = x_lo < px < x_hi
+        if inside:
+            a = _last_at_most(lx, px, False)
+            la, lb = lower[a], lower[a + 1]
+            inside = _cross(x[la], y[la], x[lb], y[lb], px, py) > 0.0
+        if inside:
+            a = _last_at_most(ux, px, True)
+            ua, ub = upper[a], upper[a + 1]
+            inside = _cross(x[ua], y[ua], x[ub], y[ub], px, py) > 0.0
+        if not inside:
+            keep[m] = i
+            m += 1
+    return keep[:m]
+
+
+@njit(cache=True)
+def _hulls(points: np.ndarray, begin: np.ndarray, end: np.ndarray, dirs: np.ndarray) -> tuple:
+    n_clusters = len(begin)
+    ring_starts = np.zeros(n_clusters + 1, np.int64)
+    parts = []
+    for c in range(n_clusters):
+        a, b = begin[c], end[c]
+        if b <= a:
+            parts.append(np.empty(0, np.int64))
+            continue
+        x = np.ascontiguousarray(points[a:b, 0])
+        y = np.ascontiguousarray(points[a:b, 1])
+        cand = _survivors(x, y, dirs)
+        if len(cand) > _SAMPLE_ABOVE:
+            # A ring of walls leaves most of its points outside the octagon: the hull of an
+            # even sample of them (a polygon of hull points too) drops most of the rest before
+            # the sort.
+            rough = _sorted_hull(x, y, cand[:: len(cand) // _SAMPLE])
+            if len(rough) >= 3:
+                cand = _outside(x, y, cand, rough)
+        ring = _sorted_hull(x, y, cand)
+        parts.append(ring + a)
+        ring_starts[c + 1] = len(ring)
+    ring_starts = np.cumsum(ring_starts)
+    rings = np.empty(ring_starts[-1], np.int64)
+    for c in range(n_clusters):
+        rings[ring_starts[c] : ring_starts[c + 1]] = parts[c]
+    return rings, ring_starts
+
+
+def footprint_hulls(
+    points: np.ndarray, begin: np.ndarray, end: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The x, y convex hull of each cluster of ``points`` (P, 2 or more) float64, metres,
+    whose cluster c is rows ``begin[c]:end[c]`` (begin, end (C,) int64).
+
+    Returns (rows (V,) int64, ring_starts (C + 1,) int64): cluster c's hull is
+    ``points[rows[ring_starts[c]:ring_starts[c + 1]], :2]``, counter-clockwise from its lowest
+    x (then y); see the module for degenerate clusters (an empty one has an empty ring).
+    Raises ValueError on a wrong shape or rows outside the points."""
+    pts = np.asarray(points, dtype=np.float64)
+    lo = np.asarray(begin, dtype=np.int64)
+    hi = np.asarray(end, dtype=np.int64)
+    if pts.ndim != 2 or pts.shape[1] < 2 or lo.ndim != 1 or lo.shape != hi.shape:
+        raise ValueError(
+            f"footprint_hulls: points (P, 2+), begin and end (C,); got {pts.shape}, "
+            f"{lo.shape}, {hi.shape}"
+        )
+    if len(lo) and (lo.min() < 0 or hi.max() > len(pts) or (hi < lo).any()):
+        raise ValueError("footprint_hulls: each cluster's rows must lie within the points")
+    return _hulls(pts, lo, hi, _DIRS)
+
+
+@warmer
+def _warm() -> None:
+    footprint_hulls(np.eye(3), np.array([0]), np.array([3]))
