@@ -174,6 +174,20 @@ def test_knn_sampled_is_seeded_and_labels_everything_nearby(table_scene):
     assert [c.point_count for c in a.clusters] == [len(x) for x in boxes]
 
 
+def test_room_wide_structure_is_not_split_but_a_row_of_barrels_is(rng):
+    """Two pillars joined by a thin wall, 2 m apart, are room structure: one cluster, whatever
+    necks its footprint has. The same shapes 0.8 m apart are two objects and a wall: split."""
+    floor = make_surface(0, 0.0, -2, 4, -1, 1)
+    for span, parts in ((2.0, 1), (0.8, 2)):
+        pillars = [cylinder(x, 0.0, 0.15, 0.0, 0.6) for x in (0.0, span)]
+        n = int(span * 20_000)
+        wall = np.c_[rng.uniform(0, span, n), rng.uniform(-0.01, 0.01, n), rng.uniform(0, 0.6, n)]
+        pts = np.vstack([*pillars, wall])
+        res = detect_objects(pts, SurfaceResult([floor], np.full(len(pts), -1, np.int32)))
+        assert len(res.clusters) == parts
+        assert res.stats["merged_splits"] == parts - 1
+
+
 def two_cylinders(gap: float, r: float = 0.15):
     floor = make_surface(0, 0.0, -1, 1, -1, 1)
     c1 = cylinder(-r - gap / 2, 0.0, r, 0.0, 0.3)

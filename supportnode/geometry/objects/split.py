@@ -5,7 +5,8 @@ radius ``split_neck_width / 2`` is cut along the neck (`split_footprint`); one w
 has no neck but whose top is two flat levels side by side, each standing on the surface (two
 boxes of different heights face to face), is cut at the step (`split_step`); else, when
 ``split_concave``, along concave creases (`split_concave`). Clusters are never split
-vertically: a box standing on another stays with it.
+vertically: a box standing on another stays with it. Clusters wider than room structure
+(convexity's ``_MAX_EXTENT``) are never split.
 
 Points cp (M, 3) float64 metres, z up; labels (M,) int64, -1 = none.
 """
@@ -18,6 +19,7 @@ import numpy as np
 
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.arrays import _group_by_label
+from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.split_concave import _CONCAVE_MAX_EXTENT, _split_concave
 from supportnode.geometry.objects.split_footprint import _may_split, _split_recursive
 from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_step
@@ -57,7 +59,12 @@ def _split_touching(
     hi = np.maximum.reduceat(xy, starts, axis=0)
     shape = np.floor((hi - lo) / cell).astype(np.int64) + 3  # as _split_footprint rasterises
     next_id = n
-    for c in np.flatnonzero(nonempty & _may_split(shape, cell, radius)):  # wide clusters only
+    # Room structure (a ring of walls, a counter's run of cabinets) is no object to part: its
+    # pieces would be no objects either, and under noise every wall is thick enough to be
+    # tried (a room-sized raster, a third of a noisy map's objects stage). As the convex
+    # method, it stays whole.
+    room = (hi - lo).max(axis=1) > _MAX_EXTENT
+    for c in np.flatnonzero(nonempty & _may_split(shape, cell, radius) & ~room):
         idx = order[bounds[c + 1] : bounds[c + 2]]
         extent = float((hi[c] - lo[c]).max())
         if memo is None:
