@@ -20,6 +20,7 @@ Everything here is in the node's detection frame (map frame rotated to gravity).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ from supportnode.geometry.freespace import FreeSpace
 from supportnode.geometry.objects import Cluster
 from supportnode.geometry.surfaces import Surface, detect_surfaces
 from supportnode.kernels.crop import crop_rows
+from supportnode.kernels.groups import rows_at_ranks
 from supportnode.params import DetectParams
 from supportnode.pipeline import objects_stage, surfaces_stage
 
@@ -100,19 +102,22 @@ class Phase:
 
 
 def _cluster_points(points: np.ndarray, labels: np.ndarray, n: int) -> list[np.ndarray]:
-    """Up to MAX_CLUSTER_POINTS evenly spaced points of each cluster (grouped in one sort)."""
+    """Up to MAX_CLUSTER_POINTS evenly spaced points of each cluster, in row order: those at
+    ranks ``np.linspace(0, count - 1, MAX_CLUSTER_POINTS).round()`` of its rows (all of a
+    smaller one), picked in one pass over the labels (see `kernels.groups`)."""
     if n == 0:
         return []
-    on = np.flatnonzero(labels >= 0)
-    order = on[np.argsort(labels[on], kind="stable")]
-    bounds = np.searchsorted(labels[order], np.arange(n + 1))
-    out = []
-    for i in range(n):  # one slice per cluster, not per point
-        idx = order[bounds[i] : bounds[i + 1]]
-        if len(idx) > MAX_CLUSTER_POINTS:
-            idx = idx[np.linspace(0, len(idx) - 1, MAX_CLUSTER_POINTS).round().astype(np.int64)]
-        out.append(points[idx].astype(np.float32))
-    return out
+    counts = np.bincount(labels.astype(np.int64) + 1, minlength=n + 1)[1 : n + 1]
+    keep = np.minimum(counts, MAX_CLUSTER_POINTS)
+    j = np.arange(MAX_CLUSTER_POINTS)
+    # np.linspace's arithmetic, row by row: j * step, the last one the end itself.
+    spread = j[None, :] * ((counts - 1) / (MAX_CLUSTER_POINTS - 1))[:, None]
+    spread[:, -1] = counts - 1
+    ranks = np.where(counts[:, None] > MAX_CLUSTER_POINTS, spread.round(), j[None, :])
+    starts = np.concatenate([[0], np.cumsum(keep)])
+    rows = rows_at_ranks(labels, ranks[j[None, :] < keep[:, None]].astype(np.int64), starts)
+    picked = np.take(points, rows, axis=0).astype(np.float32)
+    return [picked[a:b] for a, b in itertools.pairwise(starts.tolist())]
 
 
 def begin_full(

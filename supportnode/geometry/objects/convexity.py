@@ -28,6 +28,7 @@ from supportnode.geometry.objects.faces import (
 from supportnode.geometry.objects.stacks import cut_stacks
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.components import label_edges
+from supportnode.kernels.groups import label_boxes
 from supportnode.params import ObjectParams
 
 _MIN_PER_CELL = 3  # median points per occupied cell
@@ -324,23 +325,19 @@ def cell_levels(
     if n == 0:
         return level
     per_point = np.bincount(voxel)[voxel].astype(np.float64)
-    if (comp < 0).any():
-        ok = comp >= 0
-        cp, comp, per_point = cp[ok], comp[ok], per_point[ok]
-    size = np.bincount(comp, minlength=n)
-    per_voxel = np.bincount(comp, per_point, n) / np.maximum(size, 1)
+    # Points of no component counted in a bin of their own (not masked out: a masked copy of
+    # the points cost more than the rest of this function).
+    shifted = comp + 1
+    size = np.bincount(shifted, minlength=n + 1)[1:]
+    per_voxel = np.bincount(shifted, per_point, n + 1)[1:] / np.maximum(size, 1)
     spacing = _SPACING_PER_VOXEL * params.cluster_cell / np.sqrt(np.maximum(per_voxel, 1e-9))
     need = _CELL_PER_SPACING * spacing / params.convex_cell  # in convex cells
     big = (size >= params.min_points) & (need <= CELL_STEPS[-1])
     if not big.any():
         return level
-    order = np.argsort(comp, kind="stable")
-    starts = np.searchsorted(comp[order], np.arange(n))[size > 0]
     # Room structure (a wall, a shelf's frame) is no object to part at its creases.
-    for a in range(2):  # per component at once, a column at a time
-        col = cp[:, a][order]
-        extent = np.maximum.reduceat(col, starts) - np.minimum.reduceat(col, starts)
-        big[size > 0] &= extent <= _MAX_EXTENT
+    lo, hi = label_boxes(cp, comp, n)
+    big &= (hi - lo)[:, :2].max(axis=1) <= _MAX_EXTENT
     for step_k in reversed(range(len(CELL_STEPS))):
         level[big & (CELL_STEPS[step_k] >= need)] = step_k
     return level

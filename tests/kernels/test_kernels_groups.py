@@ -1,0 +1,63 @@
+"""Rows of each label at given ranks, in one pass: np.flatnonzero(labels == c)[ranks]."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from supportnode.kernels.groups import label_boxes, rows_at_ranks
+
+
+@settings(max_examples=80, deadline=None)
+@given(m=st.integers(0, 400), n=st.integers(1, 12), seed=st.integers(0, 10_000))
+def test_rows_are_the_ranked_rows_of_each_label(m, n, seed):
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(-1, n, m)
+    ranks, starts = [], [0]
+    for c in range(n):
+        count = int((labels == c).sum())
+        # Any ascending ranks, some past the label's last row.
+        want = np.unique(rng.integers(0, count + 2, rng.integers(0, 6)))
+        ranks.extend(want.tolist())
+        starts.append(len(ranks))
+    got = rows_at_ranks(labels, np.array(ranks, np.int64), np.array(starts))
+    for c in range(n):
+        rows = np.flatnonzero(labels == c)
+        want = np.array(ranks[starts[c] : starts[c + 1]], np.int64)
+        padded = np.r_[rows, -1]  # a rank past the last row finds no row
+        ref = padded[np.minimum(want, len(rows))]
+        np.testing.assert_array_equal(got[starts[c] : starts[c + 1]], ref)
+
+
+def test_labels_beyond_the_starts_and_int32_labels():
+    labels = np.array([5, 0, -1, 0, 1, 0], np.int32)  # label 5 has no ranks: ignored
+    got = rows_at_ranks(labels, np.array([0, 2, 0]), np.array([0, 2, 3]))
+    np.testing.assert_array_equal(got, [1, 5, 4])
+
+
+def test_bad_starts_are_refused():
+    with pytest.raises(ValueError, match="starts must ascend"):
+        rows_at_ranks(np.zeros(3, np.int64), np.array([0, 1]), np.array([0, 1]))
+    with pytest.raises(ValueError, match="starts must ascend"):
+        rows_at_ranks(np.zeros(3, np.int64), np.array([0, 1]), np.array([0, 2, 1]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(m=st.integers(0, 300), n=st.integers(0, 8), seed=st.integers(0, 10_000))
+def test_label_boxes_are_each_labels_min_and_max(m, n, seed):
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(size=(m, 3))
+    labels = rng.integers(-1, n + 2, m)  # labels n, n + 1 beyond the count: ignored
+    lo, hi = label_boxes(pts, labels, n)
+    assert lo.shape == hi.shape == (n, 3)
+    for c in range(n):
+        mine = pts[labels == c]
+        if len(mine) == 0:
+            assert np.isposinf(lo[c]).all() and np.isneginf(hi[c]).all()
+        else:
+            np.testing.assert_array_equal(lo[c], mine.min(axis=0))
+            np.testing.assert_array_equal(hi[c], mine.max(axis=0))
+    with pytest.raises(ValueError, match="labels"):
+        label_boxes(pts, labels[:-1] if m else np.zeros(1, np.int64), n)
