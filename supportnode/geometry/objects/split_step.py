@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from supportnode.geometry.objects.arrays import _col
+from supportnode.kernels.components import label_edges
 from supportnode.kernels.footprint import close3, fill_holes
 
 # Splitting at a step of the top height (see _split_step), metres and fractions: raster cell
@@ -105,10 +104,8 @@ def _plateaus(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
             link = np.abs(grid[a] - grid[b]) <= _STEP_LINK
         rows.append(vid[a][link])
         cols.append(vid[b][link])
-    r, c = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(len(cells),) * 2)
-    _, plateau = connected_components(graph.tocsr(), directed=False)
-    return plateau
+    # Compiled union-find: scipy's numbering, without building a sparse matrix per cluster.
+    return label_edges(len(cells), np.concatenate(rows), np.concatenate(cols))
 
 
 def _beside_free(

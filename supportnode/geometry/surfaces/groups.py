@@ -3,21 +3,15 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
+
+from supportnode.kernels.components import label_edges
 
 
 def _components(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Connected-component label of each of n nodes given undirected edges (components
-    numbered by their first node, whatever the order of the edges)."""
-    # The CSR arrays directly, in the dtypes csgraph works in: from a COO matrix, scipy's
-    # conversions and checks cost twice the search on graphs of a few thousand edges.
-    indptr = np.zeros(n + 1, dtype=np.int32)
-    np.cumsum(np.bincount(src, minlength=n), out=indptr[1:])
-    order = np.argsort(src, kind="stable")
-    graph = csr_matrix((np.ones(len(src)), dst[order].astype(np.int32), indptr), shape=(n, n))
-    _, comp = connected_components(graph, directed=False)
-    return comp
+    """Connected-component label (int64) of each of n nodes given undirected edges
+    (components numbered by their first node, whatever the order of the edges): the
+    compiled union-find, scipy's numbering without building a sparse matrix."""
+    return label_edges(n, src, dst)
 
 
 def _median_by_group(values: np.ndarray, groups: np.ndarray, n: int) -> np.ndarray:
