@@ -32,7 +32,10 @@ def _rehash(keys: np.ndarray, used: int, size: int) -> np.ndarray:
 @njit(cache=True)
 def _grow(a: np.ndarray) -> np.ndarray:
     out = np.zeros((2 * a.shape[0], a.shape[1]), a.dtype)
-    out[: a.shape[0]] = a
+    # Element by element: a 2-D slice assignment costs ~3 s of compiling on a fresh install.
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            out[i, j] = a[i, j]
     return out
 
 

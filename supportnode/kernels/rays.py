@@ -61,7 +61,8 @@ def _ray_voxels(origin, u, n, size, keys, vals, shift, bits, offs, shifts, last_
 @njit(cache=True, nogil=True)
 def _grow(a):
     out = np.empty(2 * a.size, a.dtype)
-    out[: a.size] = a
+    for i in range(a.size):  # a loop: slice assignment compiles for seconds on a fresh install
+        out[i] = a[i]
     return out
 
 
