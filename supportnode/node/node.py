@@ -246,6 +246,12 @@ class Node(Closing):
         from supportnode.kernels import runtime
 
         runtime.configure(self.cfg.threads or None)
+        # A fresh install has no compiled kernels yet: say why the first start is slow.
+        self.log.info(
+            "%s: preparing kernels (the first run after an install compiles them, 10-20 s; "
+            "later runs load them from numba's cache)",
+            self.cfg.name,
+        )
         took = runtime.warm()
         self.log.info("%s: kernels ready in %.2f s", self.cfg.name, took)
 
