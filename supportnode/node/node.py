@@ -242,16 +242,11 @@ class Node(Closing):
                 signal.signal(sig, old)
 
     def _warm(self) -> None:
-        """Compile or load the kernels the detection uses (once per process), and say so."""
+        """Compile (a fresh install: 10-20 s) or load the kernels, saying so before and after."""
         from supportnode.kernels import runtime
 
         runtime.configure(self.cfg.threads or None)
-        # A fresh install has no compiled kernels yet: say why the first start is slow.
-        self.log.info(
-            "%s: preparing kernels (the first run after an install compiles them, 10-20 s; "
-            "later runs load them from numba's cache)",
-            self.cfg.name,
-        )
+        self.log.info("%s: preparing kernels (first run after an install: 10-20 s)", self.cfg.name)
         took = runtime.warm()
         self.log.info("%s: kernels ready in %.2f s", self.cfg.name, took)
 
