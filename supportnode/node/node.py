@@ -49,6 +49,7 @@ from supportnode.node.intake import scan_problem
 from supportnode.node.latency import LatencyWindow
 from supportnode.node.mailbox import Mailbox
 from supportnode.node.outbox import Outbox
+from supportnode.node.rehearsal import warm_up
 from supportnode.node.sockets import NodeSockets
 from supportnode.params import DetectParams
 
@@ -243,11 +244,8 @@ class Node(Closing):
 
     def _warm(self) -> None:
         """Compile (a fresh install: 10-20 s) or load the kernels, saying so before and after."""
-        from supportnode.kernels import runtime
-
-        runtime.configure(self.cfg.threads or None)
         self.log.info("%s: preparing kernels (first run after an install: 10-20 s)", self.cfg.name)
-        took = runtime.warm()
+        took = warm_up(self.params, self.cfg.threads or None)
         self.log.info("%s: kernels ready in %.2f s", self.cfg.name, took)
 
     def _receive_loop(self, duration: float | None) -> None:
