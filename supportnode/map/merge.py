@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.map.clearing import March
 from supportnode.map.keys import pack_keys
 from supportnode.map.scan import ScanVoxelizer, _plane_fits, _plane_noise, _ScanGrid
 
@@ -27,10 +28,11 @@ class Merging(ScanVoxelizer):
     """Mixin of `VoxelMap`: `_merge` and the kept points' policies."""
 
     def _merge(
-        self, cols: list[np.ndarray], stamp: float, origin: np.ndarray
+        self, cols: list[np.ndarray], stamp: float, origin: np.ndarray, march: March | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Add the scan's voxel moments to the store; returns the (V,) slots hit and their
-        (V, 3) keys (a new array, not a view of the store)."""
+        (V, 3) keys (a new array, not a view of the store). march: the scan's clearing rays in
+        flight, which read the key table: new keys go in once they are done."""
         if len(cols[0]) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3), np.int64)
         grid = self._voxelize(cols)
@@ -40,7 +42,6 @@ class Merging(ScanVoxelizer):
         if len(new):
             fresh = self._take(len(new))
             slots[new] = fresh
-            self._hash.insert(packed[new], fresh)
             self._keys[fresh] = grid.keys[new]
             self._packed[fresh] = packed[new]
             self._alive[fresh] = True
@@ -64,6 +65,10 @@ class Merging(ScanVoxelizer):
             self.version += 1
             if self.keep_points:
                 self._keep_recent(self._by_voxel(grid), slots)
+        if len(new):
+            if march is not None:
+                march.pairs()
+            self._hash.insert(packed[new], slots[new])
         return slots, grid.keys
 
     def _keep_first(

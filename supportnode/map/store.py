@@ -27,7 +27,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 from supportnode.geometry.transform import transform_points
-from supportnode.map.clearing import Clearing
+from supportnode.map.clearing import Clearing, March
 from supportnode.map.forget import Forgetting
 from supportnode.map.hash import KeyHash
 from supportnode.map.keys import pack_keys
@@ -255,10 +255,13 @@ class VoxelMap(Merging, Clearing, Forgetting):
         self._stats["scans"] += 1
         self._stats["points_merged"] += npts
 
-        slots, keys = self._merge(cols, float(stamp), origin)
+        march = None
+        if self.params.clear_free_space and npts:
+            march = self._begin_clear(cols, origin)
+        slots, keys = self._merge(cols, float(stamp), origin, march)
         lo = np.array([c.min() for c in cols]) if npts else np.full(3, np.inf)
         hi = np.array([c.max() for c in cols]) if npts else np.full(3, -np.inf)
-        removed = self._clear_and_forget(cols, origin, float(stamp))
+        removed = self._clear_and_forget(march, origin, float(stamp))
         # The scan's keys are those of its slots: no gather from the store unless clearing
         # or forgetting removed some of them.
         alive = self._alive[slots]
@@ -266,12 +269,13 @@ class VoxelMap(Merging, Clearing, Forgetting):
             keys = keys[alive]
         return Touched(keys, removed, lo, hi)
 
-    def _clear_and_forget(self, cols: list[np.ndarray], origin: np.ndarray, stamp: float):
-        """The end of a scan's integration: free-space clearing along its rays, then the
-        radius, age and cap pass when due; returns the removed (R, 3) keys."""
+    def _clear_and_forget(self, march: March | None, origin: np.ndarray, stamp: float):
+        """The end of a scan's integration: free-space clearing along its rays (``march``:
+        None when not clearing), then the radius, age and cap pass when due; returns the
+        removed (R, 3) keys."""
         removed = []
-        if self.params.clear_free_space and len(cols[0]):
-            removed.append(self._clear(cols, origin))
+        if march is not None:
+            removed.append(self._clear(march, origin))
         removed.append(self._maybe_forget(stamp, origin))
         return np.concatenate(removed)
 
