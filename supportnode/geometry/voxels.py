@@ -237,7 +237,45 @@ class VoxelGrid:
 
 
 def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) -> VoxelGrid:
-    """Group (N, 3) points into voxels of ``size`` (3,) metres and accumulate moments.
+    """Group (N, 3) finite points into voxels of ``size`` (3,) metres and accumulate moments.
+
+    Compiled (`kernels.voxelgrid`) when the points' box holds few possible keys, the usual
+    case; otherwise `_voxelize_numpy`, which sorts. Both give the same bits."""
+    pts = np.asarray(points, dtype=np.float64)
+    size = np.asarray(size, dtype=np.float64).reshape(3)
+    n = len(pts)
+    if n == 0 or pts.ndim != 2 or pts.shape[1] != 3:
+        return _voxelize_numpy(pts, size)
+    from supportnode.kernels.voxelgrid import key_range, voxel_grid
+
+    lo, hi, finite = key_range(pts, size)
+    if not finite:
+        raise InputError("points must be finite (and well inside float64's range) to voxelize")
+    origin, dims = _box(lo, hi)
+    top = int(np.prod(dims)) - 1
+    if top >= max(8 * n, 1 << 20):
+        return _voxelize_numpy(pts, size)
+    lin, counts, starts, order, point_voxel, srt, sums, outer = voxel_grid(pts, size, origin, dims)
+    rem, kz = np.divmod(lin, dims[2])
+    kx, ky = np.divmod(rem, dims[1])
+    vkeys = np.stack([kx, ky, kz], axis=1) + origin
+    return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts, list(srt))
+
+
+def _box(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The keys' origin and extent (3,) int64 from their floored minima and maxima (3,)."""
+    if max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40:
+        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
+    origin = lo.astype(np.int64)
+    dims = (hi - lo).astype(np.int64) + 1
+    if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
+        raise InputError("voxel grid too large to index (extent / voxel size overflows)")
+    return origin, dims
+
+
+def _voxelize_numpy(points: np.ndarray, size: np.ndarray) -> VoxelGrid:
+    """`voxelize` in numpy (the sorting path for sparse boxes, and the compiled one's
+    reference).
 
     One function of ~80 lines on purpose: its (N,) buffers are dropped (``del``) or reused
     the moment they are spent, and its time follows its peak memory (fresh pages fault);
@@ -257,14 +295,7 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
     for a in range(3):
         q = pts[:, a] / size[a]
         kcols.append(np.floor(q, out=q))
-    lo = np.array([c.min() for c in kcols])
-    hi = np.array([c.max() for c in kcols])
-    if max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40:
-        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
-    origin = lo.astype(np.int64)
-    dims = (hi - lo).astype(np.int64) + 1
-    if float(np.prod(dims.astype(np.float64))) >= 2.0**62:
-        raise InputError("voxel grid too large to index (extent / voxel size overflows)")
+    origin, dims = _box(np.array([c.min() for c in kcols]), np.array([c.max() for c in kcols]))
     # lin = ((k0 * d1) + k1) * d2 + k2 of the origin-relative keys k, in one buffer.
     lin = kcols[0].astype(np.int64)
     lin -= origin[0]

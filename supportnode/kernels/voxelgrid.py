@@ -1,0 +1,235 @@
+"""Voxelizing a cloud for detection: each point's voxel, the voxels' counts and moments.
+
+`geometry.voxels.voxelize` on a box of few possible keys (the usual case), in two compiled
+passes instead of a dozen numpy ones: the keys' range, then the keys, a counting sort of the
+points by voxel (stable: a voxel's points keep their input order), their offsets from the
+voxel's corner and the moments. The same bits as the numpy path: the same floating-point
+operations per point, and each voxel's sums added as ``numpy.add.reduceat`` adds them (the
+voxel's first value plus numpy's pairwise sum of the rest). Releases the interpreter lock.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from supportnode.kernels.runtime import warmer
+
+__all__ = ["key_range", "voxel_grid"]
+
+# numpy's pairwise summation: blocks of this many values are summed with eight accumulators.
+_BLOCK = 128
+# OUTER_INDEX of supportnode.geometry.voxels: xx, yy, zz, xy, xz, yz.
+_PAIRS = np.array([[0, 0], [1, 1], [2, 2], [0, 1], [0, 2], [1, 2]], np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _key_range(pts, size):
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    finite = True
+    for i in range(pts.shape[0]):
+        for a in range(3):
+            k = np.floor(pts[i, a] / size[a])
+            if not math.isfinite(k):
+                finite = False
+            lo[a] = min(lo[a], k)
+            hi[a] = max(hi[a], k)
+    return lo, hi, finite
+
+
+@njit(cache=True, nogil=True)
+def _value(a, b, i, product):
+    return a[i] * b[i] if product else a[i]
+
+
+@njit(cache=True, nogil=True)
+def _pairwise(a, b, start, n, product):
+    """numpy's pairwise sum of a[start:start + n] (product: of a * b), to the bit."""
+    if n < 8:
+        res = 0.0
+        for i in range(start, start + n):
+            res += _value(a, b, i, product)
+        return res
+    if n <= _BLOCK:
+        # Eight accumulators as scalars (an array would be allocated per call).
+        r0 = _value(a, b, start, product)
+        r1 = _value(a, b, start + 1, product)
+        r2 = _value(a, b, start + 2, product)
+        r3 = _value(a, b, start + 3, product)
+        r4 = _value(a, b, start + 4, product)
+        r5 = _value(a, b, start + 5, product)
+        r6 = _value(a, b, start + 6, product)
+        r7 = _value(a, b, start + 7, product)
+        i = start + 8
+        end = start + n - (n % 8)
+        while i < end:
+            r0 += _value(a, b, i, product)
+            r1 += _value(a, b, i + 1, product)
+            r2 += _value(a, b, i + 2, product)
+            r3 += _value(a, b, i + 3, product)
+            r4 += _value(a, b, i + 4, product)
+            r5 += _value(a, b, i + 5, product)
+            r6 += _value(a, b, i + 6, product)
+            r7 += _value(a, b, i + 7, product)
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < start + n:
+            res += _value(a, b, i, product)
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise(a, b, start, n2, product) + _pairwise(a, b, start + n2, n - n2, product)
+
+
+@njit(cache=True, nogil=True)
+def _sort_points(pts, size, origin, dims, top):
+    """Each point's voxel rank, the voxels' linear keys and counts, the points' order (a
+    stable counting sort by voxel) and their offsets from the corner, in that order."""
+    n = pts.shape[0]
+    lin = np.empty(n, np.int64)
+    rank = np.zeros(top + 1, np.int64)
+    for i in range(n):
+        k = np.int64(0)
+        for a in range(3):  # ((k0 - o0) * d1 + k1 - o1) * d2 + k2 - o2, as the numpy path
+            k = k * dims[a] + (np.int64(np.floor(pts[i, a] / size[a])) - origin[a])
+        lin[i] = k
+        rank[k] += 1
+    nv = 0
+    for k in range(top + 1):
+        nv += rank[k] > 0
+    lin_of_voxel = np.empty(nv, np.int64)
+    counts = np.empty(nv, np.int64)
+    starts = np.empty(nv, np.int64)
+    v = 0
+    at = 0
+    for k in range(top + 1):  # counts become ranks: ascending keys
+        if rank[k] > 0:
+            lin_of_voxel[v], counts[v], starts[v] = k, rank[k], at
+            at += rank[k]
+            rank[k] = v
+            v += 1
+    fill = starts.copy()
+    order = np.empty(n, np.int64)
+    point_voxel = np.empty(n, np.int64)
+    srt = np.empty((3, n))
+    for i in range(n):
+        # Each point's offsets written straight to its sorted place: reading the points in
+        # order and writing to one stream per voxel beats gathering them afterwards.
+        v = rank[lin[i]]
+        point_voxel[i] = v
+        j = fill[v]
+        fill[v] = j + 1
+        order[j] = i
+        for a in range(3):
+            srt[a, j] = pts[i, a] - np.floor(pts[i, a] / size[a]) * size[a]
+    return lin_of_voxel, counts, starts, order, point_voxel, srt
+
+
+@njit(cache=True, nogil=True)
+def _values(srt, i, out):
+    """The nine moment terms of point i: x, y, z, then xx, yy, zz, xy, xz, yz."""
+    x, y, z = srt[0, i], srt[1, i], srt[2, i]
+    out[0], out[1], out[2] = x, y, z
+    out[3], out[4], out[5] = x * x, y * y, z * z
+    out[6], out[7], out[8] = x * y, x * z, y * z
+
+
+@njit(cache=True, nogil=True)
+def _block_sums(srt, start, n, res, acc, val):
+    """numpy's pairwise sums of the nine terms over points start .. start + n - 1, all nine
+    in one pass over the points, for n <= _BLOCK (one block: eight accumulators)."""
+    if n < 8:
+        res[:] = 0.0
+        for i in range(start, start + n):
+            _values(srt, i, val)
+            for m in range(9):
+                res[m] += val[m]
+        return
+    for k in range(8):
+        _values(srt, start + k, val)
+        for m in range(9):
+            acc[m, k] = val[m]
+    i = start + 8
+    end = start + n - (n % 8)
+    while i < end:
+        for k in range(8):
+            _values(srt, i + k, val)
+            for m in range(9):
+                acc[m, k] += val[m]
+        i += 8
+    for m in range(9):
+        res[m] = ((acc[m, 0] + acc[m, 1]) + (acc[m, 2] + acc[m, 3])) + (
+            (acc[m, 4] + acc[m, 5]) + (acc[m, 6] + acc[m, 7])
+        )
+    while i < start + n:
+        _values(srt, i, val)
+        for m in range(9):
+            res[m] += val[m]
+        i += 1
+
+
+@njit(cache=True, nogil=True)
+def _moments(srt, starts, counts, pairs):
+    """Per voxel, the sums (V, 3) and outer products (V, 6) as numpy.add.reduceat adds them:
+    the first value, plus the pairwise sum of the others."""
+    nv = starts.size
+    sums = np.empty((nv, 3))
+    outer = np.empty((nv, 6))
+    first = np.empty(9)
+    res = np.empty(9)
+    acc = np.empty((9, 8))
+    val = np.empty(9)
+    for v in range(nv):
+        s, n = starts[v], counts[v] - 1
+        _values(srt, s, first)
+        if n <= _BLOCK:
+            _block_sums(srt, s + 1, n, res, acc, val)
+        else:  # long runs: numpy splits them in halves, term by term
+            for a in range(3):
+                res[a] = _pairwise(srt[a], srt[a], s + 1, n, False)
+            for col in range(6):
+                res[3 + col] = _pairwise(srt[pairs[col, 0]], srt[pairs[col, 1]], s + 1, n, True)
+        for a in range(3):
+            sums[v, a] = first[a] + res[a]
+        for col in range(6):
+            outer[v, col] = first[3 + col] + res[3 + col]
+    return sums, outer
+
+
+def key_range(pts: np.ndarray, size: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The smallest and largest floored keys floor(p / size) of (N, 3) float64 points
+    (metres; N >= 1) per axis, two (3,) float64, and whether they are all finite."""
+    lo, hi, finite = _key_range(pts, np.ascontiguousarray(size, np.float64))
+    return lo, hi, bool(finite)
+
+
+def voxel_grid(
+    pts: np.ndarray, size: np.ndarray, origin: np.ndarray, dims: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """The voxels of (N, 3) float64 points (finite, metres) of edge ``size`` (3,), whose
+    keys less ``origin`` (3,) int64 lie in a box of ``dims`` (3,) int64 keys (at most a few
+    million: one counter each): linear keys (V,) int64 ascending, counts (V,), starts (V,),
+    the points' order (N,) (by voxel, stable), each point's voxel (N,), the sorted offsets from
+    the corner (3, N) float64, sums (V, 3) and outer products (V, 6) (``OUTER_INDEX``), all as
+    `geometry.voxels.voxelize` computes them."""
+    size = np.ascontiguousarray(size, np.float64)
+    origin = np.ascontiguousarray(origin, np.int64)
+    dims = np.ascontiguousarray(dims, np.int64)
+    top = int(np.prod(dims)) - 1
+    lin, counts, starts, order, voxel, srt = _sort_points(pts, size, origin, dims, top)
+    sums, outer = _moments(srt, starts, counts, _PAIRS)
+    return lin, counts, starts, order, voxel, srt, sums, outer
+
+
+@warmer
+def _warm() -> None:
+    pts = np.zeros((12, 3))
+    pts[:, 0] = [0.01, 0.02, 0.31] + [0.05] * 9
+    pts[:, 2] = np.linspace(0.0, 0.04, 12)
+    size = np.array([0.1, 0.1, 0.05])
+    lo, hi, _ = key_range(pts, size)
+    voxel_grid(pts, size, lo.astype(np.int64), (hi - lo).astype(np.int64) + 1)
