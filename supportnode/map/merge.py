@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.kernels.places import fill_places
 from supportnode.map.clearing import March
 from supportnode.map.keys import pack_keys
 from supportnode.map.scan import ScanVoxelizer, _plane_fits, _plane_noise, _ScanGrid
@@ -152,27 +153,20 @@ class Merging(ScanVoxelizer):
 
     def _fill_places(self, grid: _ScanGrid, slots: np.ndarray) -> None:
         """Fill each voxel's free kept-point places with evenly spaced picks of the scan's
-        points in it (grid: points by voxel)."""
-        k = self.keep_points
-        room = k - self._raw_n[slots]
-        sel = np.flatnonzero(room > 0)
-        if len(sel) == 0:
-            return
-        self.version += 1  # new voxels, renewed ones, or ones not yet full take points
-        counts = grid.counts[sel]
-        take = np.minimum(counts, room[sel])
-        rep = np.repeat(np.arange(len(sel)), take)
-        j = np.arange(len(rep)) - np.repeat(np.cumsum(take) - take, take)
+        points in it (grid: points by voxel; compiled: `kernels.places`)."""
         assert grid.starts is not None  # _by_voxel sorted the voxels' points
-        pick = grid.starts[sel][rep] + (j * counts[rep]) // take[rep]
-        s = slots[sel]
-        dest = s[rep] * k + self._raw_n[s][rep] + j
-        vals = np.empty((len(pick), 3), np.float32)
-        for a in range(3):  # three axes
-            vals[:, a] = grid.local[a][pick]
-        self._raw.reshape(-1, 3)[dest] = vals
-        self._pts.reshape(-1, 3)[dest] = (self._keys[s] * self.size)[rep] + vals
-        self._raw_n[s] += take.astype(np.int32)
+        filled = fill_places(
+            slots,
+            grid.counts,
+            grid.starts,
+            grid.local,
+            self._keys,
+            self.size,
+            self._raw,
+            self._pts,
+            self._raw_n,
+        )
+        self.version += int(filled > 0)  # new voxels, renewed ones, or ones not yet full
 
     @staticmethod
     def _neighbour_pairs(

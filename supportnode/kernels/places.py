@@ -1,0 +1,87 @@
+"""The map's kept points: each voxel's free places filled with evenly spaced picks of a scan's
+points in it, in one compiled pass (the numpy path's repeats and fancy-indexed scatters cost
+8 ms on a first scan of 25,000 new voxels). Releases the interpreter lock."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from supportnode.kernels.runtime import warmer
+
+__all__ = ["fill_places"]
+
+
+@njit(cache=True, nogil=True)
+def _fill(slots, counts, starts, lx, ly, lz, keys, size, raw, pts, raw_n):
+    k = raw.shape[1]
+    filled = 0
+    for v in range(slots.size):
+        s = slots[v]
+        have = raw_n[s]
+        room = k - have
+        c = counts[v]
+        if room <= 0 or c <= 0:
+            continue
+        take = min(c, room)
+        for j in range(take):
+            pick = starts[v] + (j * c) // take  # evenly spaced, the first point first
+            at = have + j
+            raw[s, at, 0] = np.float32(lx[pick])
+            raw[s, at, 1] = np.float32(ly[pick])
+            raw[s, at, 2] = np.float32(lz[pick])
+            # The corner (float64) plus the kept float32 offset, as the numpy path adds them.
+            for a in range(3):
+                pts[s, at, a] = keys[s, a] * size + np.float64(raw[s, at, a])
+        raw_n[s] = have + take
+        filled += 1
+    return filled
+
+
+def fill_places(
+    slots: np.ndarray,
+    counts: np.ndarray,
+    starts: np.ndarray,
+    local: list[np.ndarray],
+    keys: np.ndarray,
+    size: float,
+    raw: np.ndarray,
+    pts: np.ndarray,
+    raw_n: np.ndarray,
+) -> int:
+    """Fill the free places of the voxels at store ``slots`` (V,) int64 with picks of their
+    scan points; returns how many voxels took points.
+
+    counts, starts (V,) int64: each voxel's points are ``local[a][starts : starts + counts]``
+    (three (N,) float64 columns, offsets from the corner, m). A voxel with ``raw_n[s]`` of its
+    K places filled takes ``min(count, K - raw_n[s])`` points, those at ranks
+    ``j * count // take``. Writes, in place: raw (S, K, 3) float32 offsets, pts (S, K, 3)
+    float64 map-frame points (``keys`` (S, 3) int64 * ``size`` m + offset), raw_n (S,) int32."""
+    if not (raw.dtype == np.float32 and pts.dtype == np.float64 and raw_n.dtype == np.int32):
+        raise ValueError("raw must be float32, pts float64 and raw_n int32")
+    if raw.shape != pts.shape or raw.ndim != 3 or raw.shape[2] != 3:
+        raise ValueError(f"raw {raw.shape} and pts {pts.shape} must be one (S, K, 3) shape")
+    slots = np.ascontiguousarray(slots, np.int64)
+    counts = np.ascontiguousarray(counts, np.int64)
+    starts = np.ascontiguousarray(starts, np.int64)
+    if not (len(slots) == len(counts) == len(starts)):
+        raise ValueError("slots, counts and starts must have one length")
+    lx, ly, lz = (np.ascontiguousarray(c, np.float64) for c in local)
+    return int(_fill(slots, counts, starts, lx, ly, lz, keys, float(size), raw, pts, raw_n))
+
+
+@warmer
+def _warm() -> None:
+    raw = np.zeros((2, 4, 3), np.float32)
+    col = np.array([0.01, 0.02, 0.03])
+    fill_places(
+        np.array([1, 0]),
+        np.array([2, 1]),
+        np.array([0, 2]),
+        [col, col, col],
+        np.zeros((2, 3), np.int64),
+        0.05,
+        raw,
+        np.zeros((2, 4, 3)),
+        np.zeros(2, np.int32),
+    )

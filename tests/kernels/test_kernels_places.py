@@ -1,0 +1,57 @@
+"""The map's kept-point filling against a plain per-voxel reference; bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from supportnode.kernels import runtime
+from supportnode.kernels.places import _warm, fill_places
+
+
+def _reference(slots, counts, starts, local, keys, size, raw, pts, raw_n):
+    k = raw.shape[1]
+    for s, c, a in zip(slots, counts, starts, strict=True):
+        take = min(c, k - raw_n[s])
+        for j in range(max(take, 0)):
+            pick = a + j * c // take
+            off = np.array([col[pick] for col in local], np.float32)
+            raw[s, raw_n[s] + j] = off
+            pts[s, raw_n[s] + j] = keys[s] * size + off.astype(np.float64)
+        raw_n[s] += max(take, 0)
+
+
+@settings(max_examples=80, deadline=None)
+@given(v=st.integers(0, 40), k=st.integers(1, 6), seed=st.integers(0, 10_000))
+def test_fill_places_matches_a_per_voxel_reference(v, k, seed):
+    rng = np.random.default_rng(seed)
+    store = v + 5
+    slots = rng.permutation(store)[:v]
+    counts = rng.integers(0, 12, v)
+    starts = np.cumsum(counts) - counts
+    local = [rng.uniform(0, 0.05, int(counts.sum())) for _ in range(3)]
+    keys = rng.integers(-1000, 1000, (store, 3))
+    raw_n = rng.integers(0, k + 1, store).astype(np.int32)  # some voxels already full
+    raw = rng.uniform(0, 0.05, (store, k, 3)).astype(np.float32)
+    pts = rng.uniform(-50, 50, (store, k, 3))
+    want = [a.copy() for a in (raw, pts, raw_n)]
+    had = raw_n.copy()
+    _reference(slots, counts, starts, local, keys, 0.05, *want)
+    filled = fill_places(slots, counts, starts, local, keys, 0.05, raw, pts, raw_n)
+    for got, ref in zip((raw, pts, raw_n), want, strict=True):
+        assert np.array_equal(got, ref)
+    assert filled == int(np.sum((counts > 0) & (had[slots] < k)))
+
+
+def test_bad_input_and_warm_up():
+    raw = np.zeros((2, 4, 3), np.float32)
+    args = (np.zeros(1, np.int64), np.ones(1, np.int64), np.zeros(1, np.int64), [np.zeros(1)] * 3)
+    with pytest.raises(ValueError, match="float32"):
+        fill_places(*args, np.zeros((2, 3), np.int64), 0.05, raw.astype(np.float64),
+                    np.zeros((2, 4, 3)), np.zeros(2, np.int32))  # fmt: skip
+    with pytest.raises(ValueError, match="one length"):
+        fill_places(np.zeros(2, np.int64), *args[1:], np.zeros((2, 3), np.int64), 0.05, raw,
+                    np.zeros((2, 4, 3)), np.zeros(2, np.int32))  # fmt: skip
+    assert _warm in runtime._WARMERS
