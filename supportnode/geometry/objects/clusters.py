@@ -24,6 +24,7 @@ from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.geometry.objects.result import Segmentation
 from supportnode.geometry.objects.support_lookup import _SupportLookup, _supports
 from supportnode.kernels.components import label_edges, label_voxel_grid
+from supportnode.kernels.occupancy import grid_keys, occupied_voxels
 from supportnode.params import ObjectParams
 
 # Voxel clustering uses a dense voxel -> id map up to this many grid cells per point (or this
@@ -78,23 +79,13 @@ def _cluster_voxel(
         stats["voxels"] = 0
         return np.zeros(0, dtype=np.int64)
     # +1: a one-voxel empty border, so a neighbour offset can never wrap into the next row.
-    # Column by column (see _col); truncation is floor here, the offsets being >= 0.
-    ijk = [((c - c.min()) / voxel_size).astype(np.int64) + 1 for c in cp.T]
-    dims = np.array([c.max() + 2 for c in ijk], dtype=np.int64)
+    keys, dims = grid_keys(cp, voxel_size)
     strides = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
-    keys = ijk[0] * strides[0] + ijk[1] * strides[1] + ijk[2]
     cells = int(dims.prod())
     if cells <= max(_DENSE_MIN_CELLS, _DENSE_CELLS_PER_POINT * m):
         # A dense voxel -> id map: the voxels' links are followed in compiled code.
-        occupied = np.zeros(cells, dtype=bool)
-        occupied[keys] = True
-        vkeys = np.flatnonzero(occupied)
+        vkeys, occupied, vid, of_point, vsup = occupied_voxels(keys, cells, support)
         nv = len(vkeys)
-        # Ids only at occupied cells (the rest is never read): no fill of the whole grid.
-        vid = np.empty(cells, dtype=np.int32 if nv < 2**31 else np.int64)
-        vid[vkeys] = np.arange(nv)
-        of_point = vid[keys].astype(np.int64)
-        vsup = None if support is None else _highest_support(nv, of_point, support)
         comp, cuts = label_voxel_grid(vkeys, occupied, vid, FORWARD_26 @ strides, vsup)
     else:
         # Too large to map densely: the links as edge lists, by sorting.
