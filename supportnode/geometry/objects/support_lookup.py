@@ -19,6 +19,7 @@ from scipy import ndimage
 from supportnode.geometry.objects.arrays import _percentile
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.footprint import fill_holes
+from supportnode.kernels.lookup import table_lookup
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
 _BOTTOM_BAND = 0.02
@@ -110,7 +111,12 @@ class _SupportTable:
         return cls(lookups[0].cell, lo, best, threshold)
 
     def lookup(self, cp: np.ndarray) -> np.ndarray:
-        """(M,) int64 support surface id of each point of cp (M, 3), -1 for none."""
+        """(M,) int64 support surface id of each point of cp (M, 3), -1 for none (compiled:
+        `kernels.lookup`)."""
+        return table_lookup(cp, self.threshold, self.cell, self.origin, self.best)
+
+    def lookup_numpy(self, cp: np.ndarray) -> np.ndarray:
+        """`lookup` in numpy (its reference)."""
         k = np.searchsorted(self.threshold, cp[:, 2], side="right")  # surfaces at or below
         i = np.floor(cp[:, 0] / self.cell[0]).astype(np.int64) - self.origin[0]
         j = np.floor(cp[:, 1] / self.cell[1]).astype(np.int64) - self.origin[1]
