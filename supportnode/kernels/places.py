@@ -9,7 +9,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["fill_places"]
+__all__ = ["fill_places", "kept_points"]
 
 
 @njit(cache=True, nogil=True)
@@ -70,8 +70,37 @@ def fill_places(
     return int(_fill(slots, counts, starts, lx, ly, lz, keys, float(size), raw, pts, raw_n))
 
 
+@njit(cache=True, nogil=True)
+def _kept(pts, raw_n):
+    total = 0
+    for s in range(raw_n.size):
+        total += raw_n[s]
+    out = np.empty((total, 3))
+    row = 0
+    for s in range(raw_n.size):
+        for j in range(raw_n[s]):
+            out[row, 0] = pts[s, j, 0]
+            out[row, 1] = pts[s, j, 1]
+            out[row, 2] = pts[s, j, 2]
+            row += 1
+    return out
+
+
+def kept_points(pts: np.ndarray, raw_n: np.ndarray) -> np.ndarray:
+    """Every slot's kept points, slot by slot and in place order: (P, 3) float64 from pts
+    (S, K, 3) float64 and the filled places raw_n (S,) int32 (a dead slot has none), one
+    copy without an index array (the numpy path's mask and gather of a map of 400k voxels
+    took 15 ms a detection)."""
+    if pts.ndim != 3 or pts.shape[2] != 3 or raw_n.shape != pts.shape[:1]:
+        raise ValueError(f"pts must be (S, K, 3) and raw_n (S,), got {pts.shape}, {raw_n.shape}")
+    if raw_n.size and (raw_n.min() < 0 or raw_n.max() > pts.shape[1]):
+        raise ValueError(f"raw_n must lie in [0, {pts.shape[1]}]")
+    return _kept(pts, raw_n)
+
+
 @warmer
 def _warm() -> None:
+    kept_points(np.zeros((2, 4, 3)), np.array([1, 0], np.int32))
     raw = np.zeros((2, 4, 3), np.float32)
     col = np.array([0.01, 0.02, 0.03])
     fill_places(

@@ -27,6 +27,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 from supportnode.geometry.transform import transform_points
+from supportnode.kernels.places import kept_points
 from supportnode.map.clearing import Clearing, March
 from supportnode.map.forget import Forgetting
 from supportnode.map.hash import KeyHash
@@ -289,8 +290,7 @@ class VoxelMap(Merging, Clearing, Forgetting):
         if keys is None and self.representation != "centroid":
             # Every slot at once, in slot order: a dead slot keeps no points (_remove empties
             # it), so one comparison over the store replaces finding the live slots.
-            have = np.arange(self._raw.shape[1]) < self._raw_n[:, None]
-            return np.take(self._pts.reshape(-1, 3), np.flatnonzero(have), axis=0)
+            return kept_points(self._pts, self._raw_n)
         return self._points_of(self._slots(keys))
 
     def centroids(self, max_points: int | None = None) -> np.ndarray:

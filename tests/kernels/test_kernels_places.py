@@ -55,3 +55,26 @@ def test_bad_input_and_warm_up():
         fill_places(np.zeros(2, np.int64), *args[1:], np.zeros((2, 3), np.int64), 0.05, raw,
                     np.zeros((2, 4, 3)), np.zeros(2, np.int32))  # fmt: skip
     assert _warm in runtime._WARMERS
+
+
+@settings(max_examples=60, deadline=None)
+@given(s=st.integers(0, 200), k=st.integers(1, 6), seed=st.integers(0, 10_000))
+def test_kept_points_match_the_mask_and_gather(s, k, seed):
+    from supportnode.kernels.places import kept_points
+
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(size=(s, k, 3))
+    raw_n = rng.integers(0, k + 1, s).astype(np.int32)
+    have = np.arange(k) < raw_n[:, None]
+    want = np.take(pts.reshape(-1, 3), np.flatnonzero(have), axis=0)
+    got = kept_points(pts, raw_n)
+    assert got.shape == (int(raw_n.sum()), 3) and np.array_equal(got, want)
+
+
+def test_kept_points_bad_input():
+    from supportnode.kernels.places import kept_points
+
+    with pytest.raises(ValueError, match=r"raw_n must lie in \[0, 2\]"):
+        kept_points(np.zeros((2, 2, 3)), np.array([0, 3], np.int32))
+    with pytest.raises(ValueError, match="must be"):
+        kept_points(np.zeros((2, 2)), np.array([0, 1], np.int32))
