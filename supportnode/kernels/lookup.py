@@ -1,6 +1,7 @@
 """Support look-up: the surface under each point from the stacked footprint rasters of
 `geometry.objects.support_lookup._SupportTable`, in one compiled pass over the points (the
-numpy version made eight (M,) temporaries). Releases the interpreter lock."""
+numpy version made eight (M,) temporaries); and each cluster's bottom and lowest points,
+what its support is decided on. Releases the interpreter lock."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["table_lookup"]
+__all__ = ["cluster_bottoms", "table_lookup"]
 
 
 @njit(cache=True, nogil=True)
@@ -51,8 +52,103 @@ def table_lookup(
     return _lookup(np.ascontiguousarray(cp, np.float64), threshold, cell, origin, best)
 
 
+@njit(cache=True, nogil=True)
+def _select(buf, n, k):
+    """Rearrange buf[:n] so that buf[k] is its k-th smallest, those before it no larger and
+    those after no smaller (quickselect, Hoare's partition, median-of-three pivots)."""
+    lo, hi = 0, n - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        a, b, c = buf[lo], buf[mid], buf[hi]
+        pivot = max(min(a, b), min(max(a, b), c))
+        i, j = lo, hi
+        while i <= j:
+            while buf[i] < pivot:
+                i += 1
+            while buf[j] > pivot:
+                j -= 1
+            if i <= j:
+                buf[i], buf[j] = buf[j], buf[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return buf[k]
+
+
+@njit(cache=True, nogil=True)
+def _low_percentile(z, a, b, q, buf):
+    """numpy's linear percentile q (%) of z[a:b]: the two order statistics it interpolates,
+    selected in a copy (buf: scratch of at least b - a values)."""
+    n = b - a
+    for r in range(n):
+        buf[r] = z[a + r]
+    v = (n - 1) * (q / 100)
+    i = int(v)
+    lo = _select(buf, n, i)
+    hi = buf[i + 1]  # the next order statistic: the smallest of those after the i-th
+    for r in range(i + 2, n):
+        hi = min(hi, buf[r])
+    t = v - i
+    d = hi - lo
+    return hi - d * (1 - t) if t >= 0.5 else lo + d * t  # numpy's _lerp
+
+
+@njit(cache=True, nogil=True)
+def _bottoms(z, runs, band, min_points, q):
+    c = runs.shape[0]
+    bottom = np.empty(c)
+    n_low = np.zeros(c, np.int64)
+    longest = 0
+    total = 0
+    for k in range(c):
+        longest = max(longest, runs[k, 1] - runs[k, 0])
+        total += runs[k, 1] - runs[k, 0]
+    buf = np.empty(longest)
+    low = np.empty(total, np.int64)
+    m = 0
+    for k in range(c):
+        a, b = runs[k, 0], runs[k, 1]
+        if b - a >= min_points:
+            bottom[k] = _low_percentile(z, a, b, q, buf)
+        else:
+            lowest = z[a]
+            for r in range(a + 1, b):
+                lowest = min(lowest, z[r])
+            bottom[k] = lowest
+        top = bottom[k] + band
+        for r in range(a, b):
+            if z[r] <= top:
+                low[m] = r
+                m += 1
+                n_low[k] += 1
+    return bottom, n_low, low[:m].copy()
+
+
+def cluster_bottoms(
+    z: np.ndarray, runs: np.ndarray, band: float, min_points: int = 100, q: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each cluster's bottom and lowest points. z (P,) float64 heights (m) of the clusters'
+    points, cluster k holding rows ``runs[k, 0] : runs[k, 1]`` (runs (C, 2) int64). A cluster's bottom is the percentile q (numpy's linear method) of its
+    heights when it has ``min_points`` or more, else its lowest height; its low points are
+    those at most ``band`` m above it. Returns bottom (C,), the low points' count (C,) and
+    their rows (L,) int64, cluster by cluster (in the order of ``runs``), in row order."""
+    z = np.ascontiguousarray(z, np.float64)
+    runs = np.ascontiguousarray(runs, np.int64).reshape(-1, 2)
+    if len(runs) and (np.any(runs[:, 1] <= runs[:, 0]) or runs.min() < 0 or runs.max() > len(z)):
+        raise ValueError(f"runs must be non-empty row ranges [a, b) of z's {len(z)} rows")
+    if not 0 <= q < 50:
+        raise ValueError(f"q must be a low percentile in [0, 50), got {q}")
+    return _bottoms(z, runs, float(band), int(min_points), float(q))
+
+
 @warmer
 def _warm() -> None:
+    cluster_bottoms(np.linspace(0.0, 1.0, 150), np.array([[0, 120], [120, 150]]), 0.02)
     best = np.full((2, 2, 2), -1, np.int32)
     best[1, 0, 0] = 0
     cp = np.array([[0.01, 0.01, 0.5], [0.5, 0.5, 0.0]])

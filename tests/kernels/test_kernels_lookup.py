@@ -42,3 +42,40 @@ def test_bad_input_and_warm_up():
     with pytest.raises(ValueError, match="ascend"):
         table_lookup(cp, np.array([1.0, 0.0]), np.ones(2), np.zeros(2), np.zeros((3, 3, 3)))
     assert _warm in runtime._WARMERS
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    sizes=st.lists(st.integers(1, 700), min_size=0, max_size=12),
+    band=st.floats(0.0, 0.05),
+    seed=st.integers(0, 10_000),
+)
+def test_cluster_bottoms_match_numpy_percentile_and_mask(sizes, band, seed):
+    from supportnode.geometry.objects.arrays import _percentile
+    from supportnode.kernels.lookup import cluster_bottoms
+
+    rng = np.random.default_rng(seed)
+    z = np.round(rng.normal(0.5, 0.2, sum(sizes)), 3)  # ties, as quantised depth has
+    cuts = np.cumsum([0, *sizes])
+    runs = rng.permutation(np.stack([cuts[:-1], cuts[1:]], axis=1)) if sizes else np.zeros((0, 2))
+    bottom, n_low, rows = cluster_bottoms(z, runs, band)
+    want_rows = []
+    for k, (a, b) in enumerate(runs.astype(int)):
+        part = z[a:b]
+        want = _percentile(part, 1.0) if len(part) >= 100 else float(part.min())
+        assert bottom[k] == want
+        low = a + np.flatnonzero(part <= want + band)
+        assert n_low[k] == len(low)
+        want_rows.extend(low.tolist())
+    assert rows.tolist() == want_rows
+
+
+def test_cluster_bottoms_bad_input():
+    from supportnode.kernels.lookup import cluster_bottoms
+
+    with pytest.raises(ValueError, match="row ranges"):
+        cluster_bottoms(np.zeros(4), np.array([[2, 2]]), 0.01)
+    with pytest.raises(ValueError, match="row ranges"):
+        cluster_bottoms(np.zeros(4), np.array([[0, 5]]), 0.01)
+    with pytest.raises(ValueError, match="low percentile"):
+        cluster_bottoms(np.zeros(4), np.array([[0, 4]]), 0.01, q=60.0)

@@ -191,16 +191,14 @@ def _order(
     # Each cluster's run of in_clusters, in the new order.
     runs = np.stack([bounds[order] - bounds[0], bounds[order + 1] - bounds[0]], axis=1)
     if known is None:
-        groups = [in_clusters[a:b] for a, b in runs.tolist()]  # one slice per cluster
-        sids = _supports(groups, lookups, params.support_tolerance)
+        sids = _supports(in_clusters, runs, lookups, params.support_tolerance)
     else:
         sids = np.full(len(order), -2, dtype=np.int64)
         have = order < len(known)
         sids[have] = known[order[have]]
         todo = np.flatnonzero(sids == -2)
         # A cluster's surface depends on its points alone: only the new ones are looked up.
-        groups = [in_clusters[a:b] for a, b in runs[todo].tolist()]  # one slice per cluster
-        sids[todo] = _supports(groups, lookups, params.support_tolerance)
+        sids[todo] = _supports(in_clusters, runs[todo], lookups, params.support_tolerance)
     return Segmentation(
         out,
         sids,

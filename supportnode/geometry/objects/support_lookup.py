@@ -16,10 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from supportnode.geometry.objects.arrays import _percentile
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.footprint import fill_holes
-from supportnode.kernels.lookup import table_lookup
+from supportnode.kernels.lookup import cluster_bottoms, table_lookup
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
 _BOTTOM_BAND = 0.02
@@ -214,28 +213,26 @@ def _close_notches(mask: np.ndarray, cell: np.ndarray) -> np.ndarray:
     return mask | closed[r[0] : -r[0], r[1] : -r[1]]
 
 
-def _supports(groups: list[np.ndarray], lookups: list[_SupportLookup], tol: float) -> np.ndarray:
-    """(C,) int64: the surface id under the lowest points of each cluster (P_c, 3), -1 for none.
+def _supports(
+    pts: np.ndarray, runs: np.ndarray, lookups: list[_SupportLookup], tol: float
+) -> np.ndarray:
+    """(C,) int64: the surface id under the lowest points of each cluster, -1 for none; the
+    clusters are the row ranges ``runs`` (C, 2) [a, b) of pts (P, 3).
 
     The lowest points of every cluster are tested against each surface once (a loop over
     surfaces, not over cluster-surface pairs). A cluster stands on the surface over which the
     largest fraction of its lowest points lie (at least _SUPPORT_MIN_FRACTION), ties to the
     surface closest in height, then to the lowest id.
     """
-    n = len(groups)
+    n = len(runs)
     best = np.full(n, -1, dtype=np.int64)
     if n == 0 or not lookups:
         return best
-    bottom = np.empty(n)
-    low = []
-    for c, p in enumerate(groups):  # one iteration per cluster
-        z = p[:, 2]
-        # A robust bottom: one stray low point must not decide what the cluster stands on.
-        bottom[c] = _percentile(z, 1.0) if len(z) >= 100 else float(z.min())
-        low.append(p[z <= bottom[c] + _BOTTOM_BAND, :2])
-    n_low = np.array([len(q) for q in low])
+    # A robust bottom (the 1st percentile of a cluster of 100 points or more): one stray low
+    # point must not decide what the cluster stands on. Compiled: kernels.lookup.
+    bottom, n_low, rows_low = cluster_bottoms(pts[:, 2], runs, _BOTTOM_BAND, 100, 1.0)
     owner = np.repeat(np.arange(n), n_low)
-    low_xy = np.concatenate(low)
+    low_xy = np.take(pts, rows_low, axis=0)[:, :2]
     starts = np.cumsum(n_low) - n_low
     cells = _CellIndex(low_xy)
     best_frac = np.full(n, -np.inf)
