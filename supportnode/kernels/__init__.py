@@ -9,7 +9,11 @@ Conventions:
 - ``@njit(cache=True)`` always, so the compile cost is paid once per machine (numba writes the
   cache beside the source, or under ``NUMBA_CACHE_DIR`` / the user cache when that is read-only).
 - A module that adds kernels registers a small warm-up with :func:`runtime.warmer`; the node
-  calls :func:`runtime.warm` before it subscribes, so its first scan is not slow.
+  calls :func:`runtime.warm` before it subscribes, then rehearses one detection
+  (`supportnode.node.rehearsal`), so its first scan is not slow.
+- A kernel that replaces numpy code gives the same bits: the same operations in the same order
+  (numpy's pairwise sums reproduced; its arccos and cos kept, its SIMD versions rounding
+  differently from the C library's), and the numpy version stays as the tests' reference.
 - ``parallel=True`` / ``prange`` only where measured to pay on two cores; the threading layer
   and thread count are set once by :func:`runtime.configure` (``node.threads``).
 - This package's ``__init__`` imports nothing: ``import supportnode.client`` must not load numba.
