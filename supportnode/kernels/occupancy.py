@@ -2,7 +2,8 @@
 
 `geometry.objects.clusters._cluster_voxel`'s first steps in two compiled passes: the points'
 flat keys on a grid with an empty border, then the occupancy, the voxels' ids (ascending
-keys), each point's voxel and the highest surface under each voxel; what
+keys, from a radix sort of the points' keys: the grid's millions of cells are never
+scanned), each point's voxel and the highest surface under each voxel; what
 `kernels.components.label_voxel_grid` takes. Integer work only: the same values as the numpy
 steps it replaces. Releases the interpreter lock.
 """
@@ -40,21 +41,42 @@ def _grid_keys(cp, size):
 
 
 @njit(cache=True, nogil=True)
-def _occupied(keys, cells, support, with_support):
-    occupied = np.zeros(cells, np.bool_)
-    for k in keys:
-        occupied[k] = True
+def _sorted_unique(keys, cells):
+    """The distinct keys ascending: an LSD radix sort (11-bit digits) of the keys, then the
+    runs; O(M), without visiting the grid's cells."""
+    m = keys.size
+    a = keys.copy()
+    b = np.empty(m, np.int64)
+    shift = 0
+    while (cells - 1) >> shift:
+        count = np.zeros(2049, np.int64)
+        for i in range(m):
+            count[((a[i] >> shift) & 2047) + 1] += 1
+        for d in range(2048):
+            count[d + 1] += count[d]
+        for i in range(m):
+            d = (a[i] >> shift) & 2047
+            b[count[d]] = a[i]
+            count[d] += 1
+        a, b = b, a
+        shift += 11
     nv = 0
-    for c in range(cells):
-        nv += occupied[c]
-    vkeys = np.empty(nv, np.int64)
+    for i in range(m):
+        if i == 0 or a[i] != a[i - 1]:
+            a[nv] = a[i]
+            nv += 1
+    return a[:nv].copy()
+
+
+@njit(cache=True, nogil=True)
+def _occupied(keys, cells, support, with_support):
+    vkeys = _sorted_unique(keys, cells)
+    nv = vkeys.size
+    occupied = np.zeros(cells, np.bool_)
     vid = np.empty(cells, np.int32)  # read at occupied keys only
-    v = 0
-    for c in range(cells):
-        if occupied[c]:
-            vkeys[v] = c
-            vid[c] = v
-            v += 1
+    for v in range(nv):
+        occupied[vkeys[v]] = True
+        vid[vkeys[v]] = v
     of_point = np.empty(keys.size, np.int64)
     vsup = np.full(nv if with_support else 0, -1, np.int64)
     for i in range(keys.size):
