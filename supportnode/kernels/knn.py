@@ -23,6 +23,9 @@ from supportnode.kernels.runtime import configure, warmer
 # room at 2 cm cells is ~1e6 cells; a far lidar return would make it 1e12.
 _CELLS_PER_POINT = 16
 _MIN_CELLS = 1 << 22
+# Queries from which the search runs on all the kernels' threads (the parallel kernel then
+# compiles on its first use: ~7 s after an install, paid by big offline clouds only).
+_PARALLEL_MIN_QUERIES = 16_384
 _layer_chosen = False
 
 
@@ -30,8 +33,10 @@ _layer_chosen = False
 def _bounds(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # Lowest and highest corner in one pass: numpy's min/max along axis 0 of an (N, 3) array
     # took 5.7 ms of a 9 ms build on 108k points.
-    lo = pts[0].copy()
-    hi = pts[0].copy()
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        lo[a] = hi[a] = pts[0, a]
     for p in range(1, pts.shape[0]):
         for a in range(3):
             lo[a] = min(lo[a], pts[p, a])
@@ -57,13 +62,17 @@ def _bin(
         start[key[p] + 1] += 1
     for c in range(ncell):
         start[c + 1] += start[c]
-    fill = start[:-1].copy()
+    # Loops, not slice copies: numba compiles those for seconds on a fresh install.
+    fill = np.empty(ncell, np.int64)
+    for c in range(ncell):
+        fill[c] = start[c]
     sorted_pts = np.empty((n, 3))
     sorted_idx = np.empty(n, np.int64)
     for p in range(n):
         at = fill[key[p]]
         fill[key[p]] += 1
-        sorted_pts[at] = pts[p]
+        for a in range(3):
+            sorted_pts[at, a] = pts[p, a]
         sorted_idx[at] = p
     return start, sorted_pts, sorted_idx
 
@@ -182,7 +191,32 @@ def _query(
         bi = np.empty(k, np.int64)
         for row in range(b * chunk, min((b + 1) * chunk, m)):
             _query_one(query[row], k, lo, size, dims, start, sp, si, bd, bi)
-            out[row] = bi
+            for j in range(k):
+                out[row, j] = bi[j]
+    return out
+
+
+@njit(cache=True)
+def _query_serial(
+    query: np.ndarray,
+    k: int,
+    lo: np.ndarray,
+    size: float,
+    dims: np.ndarray,
+    start: np.ndarray,
+    sp: np.ndarray,
+    si: np.ndarray,
+) -> np.ndarray:
+    # _query on one thread: the same rows. Its compilation takes ~1 s where the parallel
+    # one's takes ~7 s, and small queries (the node's) gain nothing from threads.
+    m = query.shape[0]
+    out = np.empty((m, k), np.int64)
+    bd = np.empty(k)
+    bi = np.empty(k, np.int64)
+    for row in range(m):
+        _query_one(query[row], k, lo, size, dims, start, sp, si, bd, bi)
+        for j in range(k):
+            out[row, j] = bi[j]
     return out
 
 
@@ -232,17 +266,21 @@ class KnnGrid:
             raise ValueError(f"k must lie in [1, {len(self.points)}], got {k}")
         if not np.isfinite(qry).all():
             raise ValueError("queries must be finite")
+        if len(qry) < _PARALLEL_MIN_QUERIES:
+            return _query_serial(qry, int(k), *self._arrays())
         global _layer_chosen
         if not _layer_chosen:
             # A parallel kernel: its threading layer is the project's thread-safe choice
             # whoever calls first (a library user may never have warmed the kernels).
             configure()
             _layer_chosen = True
-        grid = (self.lo, self.size, self.dims, self.start, self.sorted_points, self.sorted_index)
         # Blocks of 256 queries handed out 4 at a time, not in one half per thread: a thread
         # whose core is busy elsewhere then takes fewer (the queries' costs vary as well).
         with parallel_chunksize(4):
-            return _query(qry, int(k), *grid)
+            return _query(qry, int(k), *self._arrays())
+
+    def _arrays(self) -> tuple:
+        return (self.lo, self.size, self.dims, self.start, self.sorted_points, self.sorted_index)
 
 
 @warmer

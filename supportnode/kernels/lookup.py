@@ -126,7 +126,10 @@ def _bottoms(z, runs, band, min_points, q):
                 low[m] = r
                 m += 1
                 n_low[k] += 1
-    return bottom, n_low, low[:m].copy()
+    rows = np.empty(m, np.int64)
+    for i in range(m):  # a loop, not a slice copy: that compiles for seconds
+        rows[i] = low[i]
+    return bottom, n_low, rows
 
 
 def cluster_bottoms(

@@ -45,7 +45,9 @@ def _sorted_unique(keys, cells):
     """The distinct keys ascending: an LSD radix sort (11-bit digits) of the keys, then the
     runs; O(M), without visiting the grid's cells."""
     m = keys.size
-    a = keys.copy()
+    a = np.empty(m, np.int64)
+    for i in range(m):  # loops, not slice copies: those compile for seconds
+        a[i] = keys[i]
     b = np.empty(m, np.int64)
     shift = 0
     while (cells - 1) >> shift:
@@ -65,7 +67,10 @@ def _sorted_unique(keys, cells):
         if i == 0 or a[i] != a[i - 1]:
             a[nv] = a[i]
             nv += 1
-    return a[:nv].copy()
+    out = np.empty(nv, np.int64)
+    for i in range(nv):
+        out[i] = a[i]
+    return out
 
 
 @njit(cache=True, nogil=True)

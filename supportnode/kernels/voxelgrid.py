@@ -112,7 +112,9 @@ def _sort_points(pts, size, origin, dims, top):
             at += rank[k]
             rank[k] = v
             v += 1
-    fill = starts.copy()
+    fill = np.empty(nv, np.int64)
+    for v in range(nv):  # loops, not slice copies: those compile for seconds
+        fill[v] = starts[v]
     order = np.empty(n, np.int64)
     point_voxel = np.empty(n, np.int64)
     srt = np.empty((3, n))
@@ -143,7 +145,8 @@ def _block_sums(srt, start, n, res, acc, val):
     """numpy's pairwise sums of the nine terms over points start .. start + n - 1, all nine
     in one pass over the points, for n <= _BLOCK (one block: eight accumulators)."""
     if n < 8:
-        res[:] = 0.0
+        for m in range(9):
+            res[m] = 0.0
         for i in range(start, start + n):
             _values(srt, i, val)
             for m in range(9):
