@@ -112,3 +112,17 @@ def test_two_python_threads_query_at_once():
 def test_warm_up_is_registered():
     assert _warm in runtime._WARMERS
     runtime.warm(["knn"])
+
+
+def test_parallel_and_serial_searches_give_the_same_rows():
+    from supportnode.kernels import knn
+
+    rng = np.random.default_rng(7)
+    pts = rng.uniform(0, 2, (knn._PARALLEL_MIN_QUERIES + 500, 3))
+    grid = knn.KnnGrid.build(pts, 0.05)
+    assert grid is not None
+    parallel = grid.query(pts, 8)  # enough queries for the threads
+    serial = knn._query_serial(np.ascontiguousarray(pts), 8, *grid._arrays())
+    assert np.array_equal(parallel, serial)
+    small = grid.query(pts[:100], 8)  # few: the serial twin
+    assert np.array_equal(small, serial[:100])
