@@ -98,9 +98,11 @@ def test_k_equal_to_n_empty_query_and_queries_far_outside():
 
 def test_two_python_threads_query_at_once():
     """The parallel kernel runs under the project's thread-safe layer (runtime.configure)."""
+    from supportnode.kernels.knn import _PARALLEL_MIN_QUERIES
+
     rng = np.random.default_rng(3)
-    pts = rng.uniform(0, 1, (3000, 3))
-    grid = KnnGrid.build(pts, 0.08)
+    pts = rng.uniform(0, 1, (_PARALLEL_MIN_QUERIES, 3))  # enough queries for the threads
+    grid = KnnGrid.build(pts, 0.05)
     assert grid is not None
     want = grid.query(pts, 12)
     with ThreadPoolExecutor(max_workers=2) as pool:
