@@ -172,6 +172,15 @@ def _query_one(
         r += 1
 
 
+@njit(cache=True)
+def _query_rows(query, k, lo, size, dims, start, sp, si, out, first, stop, bd, bi):
+    # The k nearest of queries first..stop-1 into out's rows (bd, bi: scratch of k).
+    for row in range(first, stop):
+        _query_one(query[row], k, lo, size, dims, start, sp, si, bd, bi)
+        for j in range(k):
+            out[row, j] = bi[j]
+
+
 @njit(cache=True, parallel=True)
 def _query(
     query: np.ndarray,
@@ -189,10 +198,8 @@ def _query(
     for b in prange((m + chunk - 1) // chunk):
         bd = np.empty(k)
         bi = np.empty(k, np.int64)
-        for row in range(b * chunk, min((b + 1) * chunk, m)):
-            _query_one(query[row], k, lo, size, dims, start, sp, si, bd, bi)
-            for j in range(k):
-                out[row, j] = bi[j]
+        _query_rows(query, k, lo, size, dims, start, sp, si, out, b * chunk,
+                    min((b + 1) * chunk, m), bd, bi)  # fmt: skip
     return out
 
 
@@ -211,12 +218,8 @@ def _query_serial(
     # one's takes ~7 s, and small queries (the node's) gain nothing from threads.
     m = query.shape[0]
     out = np.empty((m, k), np.int64)
-    bd = np.empty(k)
-    bi = np.empty(k, np.int64)
-    for row in range(m):
-        _query_one(query[row], k, lo, size, dims, start, sp, si, bd, bi)
-        for j in range(k):
-            out[row, j] = bi[j]
+    _query_rows(query, k, lo, size, dims, start, sp, si, out, 0, m, np.empty(k),
+                np.empty(k, np.int64))  # fmt: skip
     return out
 
 

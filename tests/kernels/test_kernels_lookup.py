@@ -12,6 +12,22 @@ from supportnode.kernels import runtime
 from supportnode.kernels.lookup import _warm, table_lookup
 
 
+def _numpy_lookup(table: _SupportTable, cp: np.ndarray) -> np.ndarray:
+    """The look-up as numpy steps, as the package computed it before the kernel."""
+    k = np.searchsorted(table.threshold, cp[:, 2], side="right")  # surfaces at or below
+    i = np.floor(cp[:, 0] / table.cell[0]).astype(np.int64) - table.origin[0]
+    j = np.floor(cp[:, 1] / table.cell[1]).astype(np.int64) - table.origin[1]
+    _, h, w = table.best.shape
+    outside = (i.astype(np.uint64) >= h) | (j.astype(np.uint64) >= w)
+    # One flat gather for all points (those outside read cell 0, then get -1): 3x faster
+    # than gathering k, i, j at the inside points and indexing the 3-D table with them.
+    flat = (k * h + i) * w + j
+    flat[outside] = 0
+    sup = np.take(table.best.reshape(-1), flat).astype(np.int64)
+    sup[outside] = -1
+    return sup
+
+
 @settings(max_examples=80, deadline=None)
 @given(
     m=st.integers(0, 400),
@@ -31,7 +47,7 @@ def test_lookup_matches_numpy(m, s, shape, seed):
         [rng.normal(span, 2.0 * cell * np.array(shape), (m, 2)), rng.uniform(-1.5, 2.5, m)]
     )
     cp[: m // 5, 2] = np.resize(threshold, m // 5) if s else cp[: m // 5, 2]  # ties: side right
-    assert np.array_equal(table.lookup(cp), table.lookup_numpy(cp))
+    assert np.array_equal(table.lookup(cp), _numpy_lookup(table, cp))
 
 
 def test_bad_input_and_warm_up():
@@ -44,6 +60,21 @@ def test_bad_input_and_warm_up():
     assert _warm in runtime._WARMERS
 
 
+def _percentile(a: np.ndarray, q: float) -> float:
+    """``float(np.percentile(a, q))`` (method 'linear') of a non-empty 1-D float array: the same
+    arithmetic, without the 40 us of numpy's generic quantile machinery per call."""
+    n = len(a)
+    v = (n - 1) * (q / 100)  # numpy's virtual index
+    i = int(v) if v < n - 1 else -1  # floor; numpy's index -1 (the maximum) past the end
+    # numpy's kth, not just (i, i + 1): equal values (0.0 and -0.0) then land alike.
+    part = np.partition(a, np.unique([0, -1, i, i + 1 if i >= 0 else -1]))
+    lo, hi = float(part[i]), float(part[i + 1 if i >= 0 else -1])
+    t = v - i
+    d = hi - lo
+    # numpy's _lerp: from the nearer end, so t = 1 gives hi exactly.
+    return hi - d * (1 - t) if t >= 0.5 else lo + d * t
+
+
 @settings(max_examples=80, deadline=None)
 @given(
     sizes=st.lists(st.integers(1, 700), min_size=0, max_size=12),
@@ -51,7 +82,6 @@ def test_bad_input_and_warm_up():
     seed=st.integers(0, 10_000),
 )
 def test_cluster_bottoms_match_numpy_percentile_and_mask(sizes, band, seed):
-    from supportnode.geometry.objects.arrays import _percentile
     from supportnode.kernels.lookup import cluster_bottoms
 
     rng = np.random.default_rng(seed)

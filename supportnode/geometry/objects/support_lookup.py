@@ -114,21 +114,6 @@ class _SupportTable:
         `kernels.lookup`)."""
         return table_lookup(cp, self.threshold, self.cell, self.origin, self.best)
 
-    def lookup_numpy(self, cp: np.ndarray) -> np.ndarray:
-        """`lookup` in numpy (its reference)."""
-        k = np.searchsorted(self.threshold, cp[:, 2], side="right")  # surfaces at or below
-        i = np.floor(cp[:, 0] / self.cell[0]).astype(np.int64) - self.origin[0]
-        j = np.floor(cp[:, 1] / self.cell[1]).astype(np.int64) - self.origin[1]
-        _, h, w = self.best.shape
-        outside = (i.astype(np.uint64) >= h) | (j.astype(np.uint64) >= w)
-        # One flat gather for all points (those outside read cell 0, then get -1): 3x faster
-        # than gathering k, i, j at the inside points and indexing the 3-D table with them.
-        flat = (k * h + i) * w + j
-        flat[outside] = 0
-        sup = np.take(self.best.reshape(-1), flat).astype(np.int64)
-        sup[outside] = -1
-        return sup
-
 
 def _lookups(surfaces: list[Surface]) -> tuple[list[_SupportLookup], list[_SupportLookup]]:
     """Lookups of the surfaces, undilated and dilated by one cell (filled once for both)."""
