@@ -267,9 +267,11 @@ def footprint_hulls(
     ``points[rows[ring_starts[c]:ring_starts[c + 1]], :2]``, counter-clockwise from its lowest
     x (then y); see the module for degenerate clusters (an empty one has an empty ring).
     Raises ValueError on a wrong shape or rows outside the points."""
-    pts = np.asarray(points, dtype=np.float64)
-    lo = np.asarray(begin, dtype=np.int64)
-    hi = np.asarray(end, dtype=np.int64)
+    # Contiguous always: a column view (``runs[:, 0]``) would compile a second specialisation,
+    # loaded on the node's first real scan instead of in its warm-up.
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    lo = np.ascontiguousarray(begin, dtype=np.int64)
+    hi = np.ascontiguousarray(end, dtype=np.int64)
     if pts.ndim != 2 or pts.shape[1] < 2 or lo.ndim != 1 or lo.shape != hi.shape:
         raise ValueError(
             f"footprint_hulls: points (P, 2+), begin and end (C,); got {pts.shape}, "

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.objects.bridges import split_bridges
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
     Cells,
@@ -100,7 +101,7 @@ def convex_segments(
     face = grow_faces(cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS)
     seg = np.full(len(face), -1, np.int64)
     if (face >= 0).any():
-        seg = _join_faces(cells, face, src, dst, normal_cells, origin, inside, smooth_deg)
+        seg, face = _join_faces(cells, face, src, dst, normal_cells, origin, inside, smooth_deg)
         if above is not None:
             count = cells.moments[:, 0]
             cell_above = np.bincount(cells.of_point, weights=above) / count
@@ -144,10 +145,11 @@ def _join_faces(
     origin: np.ndarray | None,
     inside: np.ndarray | None,
     smooth_deg: float,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """(F,) segment of each cell (-1: none): faces joined across their convex boundaries,
     judged with each cell's normal taken from its own face's cells (both sides of a crease
-    keep their face's normal, not the blend of the two)."""
+    keep their face's normal, not the blend of the two); and (F,) the faces, bridges parted
+    (:mod:`bridges`)."""
     fa, fb = face[src], face[dst]
     on = (fa >= 0) & (fb >= 0) & (fa != fb)
     s, t = src[on], dst[on]
@@ -164,14 +166,19 @@ def _join_faces(
     d /= np.where(dist > 0, dist, 1.0)[:, None]
     convexity = np.einsum("ij,ij->i", normal[s] - normal[t], d)
     smooth = np.einsum("ij,ij->i", normal[s], normal[t]) >= np.cos(np.radians(smooth_deg))
-    concave = (convexity < -_CONVEX_TOL) & ~smooth
+    concave = np.zeros(len(src), bool)
+    concave[on] = (convexity < -_CONVEX_TOL) & ~smooth
+    # A face that bridges a crease is parted; the links across the cut are flat (one plane).
+    face = split_bridges(face, src, dst, concave, _CONCAVE_SHARE)
+    fa, fb = face[src], face[dst]
+    on = (fa >= 0) & (fb >= 0) & (fa != fb)
     n_face = int(face.max()) + 1
     lo, hi = np.minimum(fa[on], fb[on]), np.maximum(fa[on], fb[on])
     pair, inv = np.unique(lo * n_face + hi, return_inverse=True)
     links = np.bincount(inv.reshape(-1), minlength=len(pair))
-    n_concave = np.bincount(inv.reshape(-1), weights=concave, minlength=len(pair))
+    n_concave = np.bincount(inv.reshape(-1), weights=concave[on], minlength=len(pair))
     seg_of_face = _vote(n_face, pair // n_face, pair % n_face, links, n_concave)
-    return np.where(face >= 0, seg_of_face[np.maximum(face, 0)], -1)
+    return np.where(face >= 0, seg_of_face[np.maximum(face, 0)], -1), face
 
 
 def _vote(
