@@ -150,6 +150,7 @@ CASES: dict[str, tuple[Callable[[], Scene], float, float]] = {
     "bowl": (bowl, 1.0, 0.0),
     "two_cans_1cm_apart": (two_cans, 1.0, 0.0),
     "two_cans_touching": (lambda: two_cans(0.0), 1.0, 0.0),
+    "two_cans_touching_oblique": (lambda: two_cans(0.0), 1.0, -45.0),
     "flat_book": (flat_book, 1.0, 0.0),
     "boxes_at_0.5m": (spread_boxes, 0.5, 0.0),
     "boxes_at_1.5m": (spread_boxes, 1.5, 0.0),

@@ -1,4 +1,4 @@
-"""Faces that bridge two objects across a concave crease, parted between them.
+"""Faces that join two objects, parted before the convexity vote: bridges and necks.
 
 Two cans touching side by side, or two boxes of one height, have coplanar tops that touch:
 region growing (:func:`faces.grow_faces`) makes one face of both, that face meets each
@@ -9,6 +9,12 @@ meet each other along a strongly concave boundary is a bridge: each of its cells
 the side it is nearer to through the face (the cut runs between them), and the vote
 (`convexity._vote`) decides on the pooled boundary. A cut across a long face (one object's
 L-shaped top) counts its many flat links, and joins again unless the crease outweighs it.
+
+Where an occlusion hides the crease (two cans seen so that one hides their contact, three in
+a triangle) their lids still make one level face, and its outline shows where: two discs
+touching meet in a neck. A level face whose cells' footprint has a neck (the footprint split
+of :mod:`split_footprint`, on the cells' own lattice) is parted there, and the links across
+the neck count as concave: one object's necked top is rare, and its sides join it again.
 Pure: numpy in, labels out.
 """
 
@@ -18,11 +24,128 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from supportnode.geometry.objects.faces import Cells
+from supportnode.geometry.objects.split_footprint import split_raster
+from supportnode.kernels.components import label_edges
+from supportnode.kernels.footprint import fill_holes
+
 # A boundary is a crease when it has at least this many links and this share of them concave.
 _CREASE_LINKS = 20
 _CREASE_SHARE = 0.5
 # A face bridges two creased faces when it meets each along at least this many links.
 _BRIDGE_LINKS = 5
+# A face is level when its normal is within 15 degrees of vertical (the faces' own angle),
+# and flat: its cells' heights spread by at most this many cells (standard deviation).
+_LEVEL_COS = float(np.cos(np.radians(15.0)))
+_FLAT_CELLS = 0.5
+# Necks of level faces: parts of at least this many cells, a neck shallower than this many
+# cells always cut (the footprint split's radius; relative necks as there).
+_NECK_MIN_CELLS = 6
+_NECK_RADIUS_CELLS = 1.0
+# A neck is cut when shallower than this share of both parts' depth: on a lattice of cells
+# a third of a lid's radius, two lids touching meet in a neck some 0.6 of their depth (the
+# cusp between them fills where it is narrower than a cell); a box's top has no neck at all.
+_NECK_RATIO = 0.7
+# ... and each part at least this share of its group's cells (two or three lids touching).
+_NECK_MIN_SHARE = 0.2
+# Shadows: sampled this many times along, at most this many cells long.
+_SHADOW_STEPS = 12
+_SHADOW_CELLS = 12
+# Cells this many cells above a level group's height stand on it (or in front of it).
+_ABOVE_CELLS = 1.5
+
+
+def split_necks(
+    cells: Cells,
+    face: np.ndarray,
+    up: np.ndarray,
+    src: np.ndarray,
+    dst: np.ndarray,
+    origin: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(face (F,), cut (L,)): level faces parted at the necks of their footprints, and which
+    links cross such a neck. Adjacent level faces at one height (within a cell) are taken
+    together: two lids touching are often two faces, joined only by their flat boundary.
+    face: (F,) cell labels, -1 none; up: (n_faces,) |z| of each face's unit normal; src,
+    dst: (L,) adjacent cells; origin: (3,) the sensor, metres (None: unknown)."""
+    centroid, size = cells.centroid, cells.size
+    n = len(up)
+    on = face >= 0
+    count = np.maximum(np.bincount(face[on], minlength=n), 1)
+    height = np.bincount(face[on], weights=centroid[on, 2], minlength=n) / count
+    spread = np.bincount(face[on], weights=centroid[on, 2] ** 2, minlength=n) / count
+    # Level and flat: a bowl's inside fits a level plane too, but curves through centimetres.
+    flat = np.sqrt(np.maximum(spread - height**2, 0.0)) <= _FLAT_CELLS * size
+    level = (up >= _LEVEL_COS) & flat
+    fa, fb = face[src], face[dst]
+    both = (fa >= 0) & (fb >= 0) & (fa != fb)
+    both &= level[np.maximum(fa, 0)] & level[np.maximum(fb, 0)]
+    both &= np.abs(height[np.maximum(fa, 0)] - height[np.maximum(fb, 0)]) <= size
+    group = label_edges(n, fa[both], fb[both])  # (n,) a label per set of joined level faces
+    whole = np.where(on, group[np.maximum(face, 0)], -1)
+    big = np.bincount(group, weights=count * level, minlength=n) >= 2 * _NECK_MIN_CELLS
+    part = whole.copy()
+    fresh = n
+    for g in np.flatnonzero(big).tolist():  # a few level groups per scan
+        rows = np.flatnonzero(whole == g)
+        top = float(np.median(centroid[rows, 2]))
+        cut = _neck_parts(cells, centroid[:, 2] > top + _ABOVE_CELLS * size, rows, top, origin)
+        if cut is None or np.bincount(cut).min() < _NECK_MIN_SHARE * len(rows):
+            continue  # a corner behind what stands on the face is no lid of its own
+        for k in range(1, int(cut.max()) + 1):
+            part[rows[cut == k]] = fresh
+            fresh += 1
+    if fresh == n:
+        return face, np.zeros(len(src), bool)
+    # A face on both sides of a neck becomes one face per side.
+    key = np.where(on, face.astype(np.int64) * (fresh + 1) + part, -1)
+    _, relabel = np.unique(key[on], return_inverse=True)
+    out = np.full(len(face), -1, np.int64)
+    out[on] = relabel.reshape(-1)
+    cut_links = (whole[src] >= 0) & (whole[src] == whole[dst]) & (part[src] != part[dst])
+    return out, cut_links
+
+
+def _neck_parts(
+    cells: Cells, above: np.ndarray, rows: np.ndarray, top: float, origin: np.ndarray | None
+) -> np.ndarray | None:
+    """(R,) part of each of the cells ``rows`` (one level group at height ``top``, metres)
+    when their x, y footprint on the cell lattice has a neck, else None. above: (F,) bool,
+    the cells above the group; origin: (3,) the sensor or None."""
+    ijk = cells.grid.ijk
+    lo = ijk[rows, :2].min(axis=0)
+    ij = ijk[rows, :2] - lo
+    hi = ij.max(axis=0)
+    occ = np.zeros((int(hi[0]) + 3, int(hi[1]) + 3), bool)  # a one-cell empty border
+    occ[ij[:, 0] + 1, ij[:, 1] + 1] = True
+    # What stands on the face (a box on a book) notches its visible top without parting it,
+    # under it and in the shadow it casts from the sensor: those cells count as footprint.
+    over = _shadows(cells, above, top, origin) - lo
+    on_top = (over >= 0).all(axis=1) & (over <= hi).all(axis=1)
+    occ[over[on_top, 0] + 1, over[on_top, 1] + 1] = True
+    u = ij + 0.5  # cell centres, the cell as the raster's unit
+    return split_raster(
+        fill_holes(occ), u[:, 0], u[:, 1], 1.0, _NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _NECK_RATIO
+    )
+
+
+def _shadows(cells: Cells, above: np.ndarray, top: float, origin: np.ndarray | None) -> np.ndarray:
+    """(S, 2) int lattice x, y of the cells ``above`` and of the plane z = top they hide from
+    the sensor at origin: each one's shadow, sampled from it to where its ray meets the plane
+    (at most _SHADOW_CELLS cells long)."""
+    p = cells.centroid[above]
+    if origin is None or not origin[2] > top + cells.size or len(p) == 0:
+        xy = p[:, :2]
+    else:
+        # Along the ray from the sensor through p, on to the plane: t >= 1 (p is above it).
+        t = (top - origin[2]) / np.minimum(p[:, 2] - origin[2], -1e-9)
+        reach = (t - 1.0)[:, None] * (p[:, :2] - origin[:2])
+        length = np.linalg.norm(reach, axis=1, keepdims=True)
+        reach *= np.minimum(1.0, _SHADOW_CELLS * cells.size / np.maximum(length, 1e-12))
+        steps = np.linspace(0.0, 1.0, _SHADOW_STEPS)
+        xy = (p[:, None, :2] + steps[None, :, None] * reach[:, None, :]).reshape(-1, 2)
+    pad = cells.grid.pad
+    return np.floor((xy - cells.base[:2]) / cells.size).astype(np.int64) + pad
 
 
 def split_bridges(

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
-from supportnode.geometry.objects.bridges import split_bridges
+from supportnode.geometry.objects.bridges import split_bridges, split_necks
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
     Cells,
@@ -150,6 +150,8 @@ def _join_faces(
     judged with each cell's normal taken from its own face's cells (both sides of a crease
     keep their face's normal, not the blend of the two); and (F,) the faces, bridges parted
     (:mod:`bridges`)."""
+    up = np.abs(_face_normals(cells, face)[:, 2])
+    face, neck = split_necks(cells, face, up, src, dst, origin)
     fa, fb = face[src], face[dst]
     on = (fa >= 0) & (fb >= 0) & (fa != fb)
     s, t = src[on], dst[on]
@@ -168,6 +170,7 @@ def _join_faces(
     smooth = np.einsum("ij,ij->i", normal[s], normal[t]) >= np.cos(np.radians(smooth_deg))
     concave = np.zeros(len(src), bool)
     concave[on] = (convexity < -_CONVEX_TOL) & ~smooth
+    concave |= on & neck  # across a neck of a level face
     # A face that bridges a crease is parted; the links across the cut are flat (one plane).
     face = split_bridges(face, src, dst, concave, _CONCAVE_SHARE)
     fa, fb = face[src], face[dst]

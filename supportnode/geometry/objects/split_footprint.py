@@ -84,7 +84,22 @@ def _split_footprint(
     # would run numpy's inner loop over 2 elements.
     ux = (xy[:, 0] - lo[0]) / cell
     uy = (xy[:, 1] - lo[1]) / cell
-    occ = _footprint_raster(ux, uy, shape, cell)
+    return split_raster(_footprint_raster(ux, uy, shape, cell), ux, uy, cell, radius, min_points)
+
+
+def split_raster(
+    occ: np.ndarray,
+    ux: np.ndarray,
+    uy: np.ndarray,
+    cell: float,
+    radius: float,
+    min_points: int,
+    ratio: float = _SPLIT_NECK_RATIO,
+) -> np.ndarray | None:
+    """`_split_footprint` on its footprint raster occ (H, W) bool (an empty border), the
+    points at raster coordinates ux, uy (P,) (cells from the raster's corner): part index per
+    point (P,), or None when the footprint has no neck (one shallower than ``radius`` or than
+    ``ratio`` times both parts' depth)."""
     # The taxicab distance to the edge bounds the Euclidean one from above and costs a tenth:
     # a footprint with no cell deep enough for a part (a ring of walls) stops here.
     if not _taxicab_deep(occ, cell, 1.5 * radius):
@@ -100,7 +115,7 @@ def _split_footprint(
     # on the whole raster of a room-sized cluster of walls.
     box = _true_box(depth > 0.5)
     depth_box = depth[box]
-    levels = _levels(top, cell, radius)
+    levels = _levels(top, cell, radius, ratio)
     first, probed = _first_level(depth_box, levels, cell, radius)
     for k in range(first, len(levels)):
         t = levels[k]
@@ -115,9 +130,7 @@ def _split_footprint(
         np.maximum.at(peak, comp_box[inside] - 1, depth_box[inside])
         # A part must itself be thicker than the neck that cuts it off: a wall's or a rail's
         # footprint is all neck and stays whole.
-        deep = ((t * cell < radius) | (t <= _SPLIT_NECK_RATIO * peak)) & (
-            peak * cell >= 1.5 * radius
-        )
+        deep = ((t * cell < radius) | (t <= ratio * peak)) & (peak * cell >= 1.5 * radius)
         if deep.sum() < 2:
             continue
         comp = np.zeros(occ.shape, dtype=comp_box.dtype)
@@ -148,13 +161,13 @@ def _footprint_raster(ux: np.ndarray, uy: np.ndarray, shape: np.ndarray, cell: f
     return footprint_raster(ux, uy, (h, w), int(_SPLIT_MAX_HOLE / cell**2))
 
 
-def _levels(top: float, cell: float, radius: float) -> list[float]:
+def _levels(top: float, cell: float, radius: float, ratio: float) -> list[float]:
     """The ascending depth levels (cells) at which _split_footprint cuts a footprint whose
     deepest cell is top cells deep: the shallowest neck is cut first; at most ~40 levels for
     big footprints."""
     levels = []
     for t in np.arange(0.5, top, max(0.5, top / 40.0)):
-        if t * cell >= radius and t > _SPLIT_NECK_RATIO * top:
+        if t * cell >= radius and t > ratio * top:
             break  # no part can be deep enough for this level or any higher (see `deep` there)
         levels.append(t)
     return levels

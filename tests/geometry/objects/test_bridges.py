@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from supportnode.geometry.objects.bridges import split_bridges
+from supportnode.geometry.objects.bridges import split_bridges, split_necks
 
 
 def _graph(concave_crease: bool):
@@ -40,3 +40,57 @@ def test_no_faces_no_links():
     empty = np.zeros(0, np.int64)
     out = split_bridges(face, empty, empty, np.zeros(0, bool), 0.3)
     np.testing.assert_array_equal(out, face)
+
+
+def _lids(centres, radius=0.033, spacing=0.002):
+    """Points of level discs at z = 0 (lids seen from above), one label per disc."""
+    g = np.arange(-radius, radius + 1e-9, spacing)
+    x, y = np.meshgrid(g, g)
+    disc = np.column_stack([x.ravel(), y.ravel()])
+    disc = disc[(disc**2).sum(axis=1) <= radius**2]
+    pts = [np.column_stack([disc + c, np.zeros(len(disc))]) for c in centres]
+    return np.concatenate(pts), np.repeat(np.arange(len(centres)), [len(p) for p in pts])
+
+
+def _necks(points, above_points=None, origin=None):
+    from supportnode.geometry.objects.faces import make_cells
+
+    all_pts = points if above_points is None else np.concatenate([points, above_points])
+    cells = make_cells(all_pts, 0.0075, 3)
+    face = np.full(len(cells.centroid), -1, np.int64)
+    face[cells.of_point[: len(points)]] = 0  # the lids: one level face
+    src, dst = cells.grid.adjacent_pairs()
+    out, cut = split_necks(cells, face, np.array([1.0]), src, dst, origin)
+    return out[cells.of_point[: len(points)]], cut
+
+
+def test_two_lids_touching_part_at_their_neck():
+    pts, truth = _lids([(0.0, -0.033), (0.0, 0.033)])
+    part, cut = _necks(pts)
+    for k in (0, 1):
+        assert np.bincount(part[truth == k]).max() >= 0.9 * (truth == k).sum()
+    assert part[truth == 0][0] != part[truth == 1][0]
+    assert cut.any()
+
+
+def test_one_lid_or_a_box_top_stays_one_face():
+    pts, _ = _lids([(0.0, 0.0)], radius=0.05)
+    assert len(np.unique(_necks(pts)[0])) == 1
+    g = np.arange(0.0, 0.2, 0.002)
+    x, y = np.meshgrid(g, g[:60])
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    assert len(np.unique(_necks(top)[0])) == 1
+
+
+def test_a_notch_under_what_stands_on_the_face_is_no_neck():
+    # A book's top with a box standing on it across most of its depth: the visible top is two
+    # lobes joined by a strip, but the box above fills the notch.
+    g = np.arange(0.0, 0.24, 0.002)
+    x, y = np.meshgrid(g, g[:85])
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    box = (np.abs(top[:, 0] - 0.12) < 0.04) & (top[:, 1] > 0.03)
+    part, _ = _necks(top[~box])
+    assert len(np.unique(part)) == 2  # without the box: a neck
+    lid = top[box] + [0.0, 0.0, 0.05]  # the box's top, 5 cm above the book
+    part, _ = _necks(top[~box], lid, origin=np.array([0.12, -0.6, 0.6]))
+    assert len(np.unique(part)) == 1
