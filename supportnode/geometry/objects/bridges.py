@@ -51,6 +51,9 @@ _NECK_MIN_SHARE = 0.2
 # Shadows: sampled this many times along, at most this many cells long.
 _SHADOW_STEPS = 12
 _SHADOW_CELLS = 12
+# Level groups lower than this above their surface (metres) are not parted: the tops that
+# can hold something, as in stacks.py.
+_NECK_MIN_HEIGHT = 0.02
 # Cells this many cells above a level group's height stand on it (or in front of it).
 _ABOVE_CELLS = 1.5
 
@@ -62,12 +65,14 @@ def split_necks(
     src: np.ndarray,
     dst: np.ndarray,
     origin: np.ndarray | None,
+    cell_above: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(face (F,), cut (L,)): level faces parted at the necks of their footprints, and which
     links cross such a neck. Adjacent level faces at one height (within a cell) are taken
     together: two lids touching are often two faces, joined only by their flat boundary.
     face: (F,) cell labels, -1 none; up: (n_faces,) |z| of each face's unit normal; src,
-    dst: (L,) adjacent cells; origin: (3,) the sensor, metres (None: unknown)."""
+    dst: (L,) adjacent cells; origin: (3,) the sensor, metres (None: unknown); cell_above:
+    (F,) each cell's height above its surface, metres (None: unknown)."""
     centroid, size = cells.centroid, cells.size
     n = len(up)
     on = face >= 0
@@ -88,6 +93,8 @@ def split_necks(
     fresh = n
     for g in np.flatnonzero(big).tolist():  # a few level groups per scan
         rows = np.flatnonzero(whole == g)
+        if cell_above is not None and np.median(cell_above[rows]) < _NECK_MIN_HEIGHT:
+            continue  # a flat thing (a sheet, a mat): no sides to tell its pieces by
         top = float(np.median(centroid[rows, 2]))
         cut = _neck_parts(cells, centroid[:, 2] > top + _ABOVE_CELLS * size, rows, top, origin)
         if cut is None or np.bincount(cut).min() < _NECK_MIN_SHARE * len(rows):

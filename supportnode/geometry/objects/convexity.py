@@ -101,10 +101,12 @@ def convex_segments(
     face = grow_faces(cells, normal, variation, src, dst, flat, _FACE_DEG, offset, _FACE_MIN_POINTS)
     seg = np.full(len(face), -1, np.int64)
     if (face >= 0).any():
-        seg, face = _join_faces(cells, face, src, dst, normal_cells, origin, inside, smooth_deg)
-        if above is not None:
-            count = cells.moments[:, 0]
-            cell_above = np.bincount(cells.of_point, weights=above) / count
+        count = cells.moments[:, 0]
+        cell_above = None if above is None else np.bincount(cells.of_point, above) / count
+        seg, face = _join_faces(
+            cells, face, (src, dst), normal_cells, (origin, inside), smooth_deg, cell_above
+        )
+        if cell_above is not None:
             up = np.abs(_face_normals(cells, face)[:, 2])
             clearance = max(1.5 * cell, _FACE_SIGMAS * sigma)
             seg = cut_stacks(
@@ -139,19 +141,22 @@ def _inside(
 def _join_faces(
     cells: Cells,
     face: np.ndarray,
-    src: np.ndarray,
-    dst: np.ndarray,
+    adjacent: tuple[np.ndarray, np.ndarray],
     normal_cells: int,
-    origin: np.ndarray | None,
-    inside: np.ndarray | None,
+    sensor: tuple[np.ndarray | None, np.ndarray | None],
     smooth_deg: float,
+    cell_above: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(F,) segment of each cell (-1: none): faces joined across their convex boundaries,
     judged with each cell's normal taken from its own face's cells (both sides of a crease
-    keep their face's normal, not the blend of the two); and (F,) the faces, bridges parted
-    (:mod:`bridges`)."""
+    keep their face's normal, not the blend of the two); and (F,) the faces, necks and
+    bridges parted (:mod:`bridges`). adjacent: (src, dst) adjacent cells; sensor: (origin,
+    inside) as `orient` takes them; cell_above: (F,) each cell's height above its surface,
+    metres, or None."""
+    src, dst = adjacent
+    origin, inside = sensor
     up = np.abs(_face_normals(cells, face)[:, 2])
-    face, neck = split_necks(cells, face, up, src, dst, origin)
+    face, neck = split_necks(cells, face, up, src, dst, origin, cell_above)
     fa, fb = face[src], face[dst]
     on = (fa >= 0) & (fb >= 0) & (fa != fb)
     s, t = src[on], dst[on]

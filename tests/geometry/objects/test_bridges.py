@@ -52,7 +52,7 @@ def _lids(centres, radius=0.033, spacing=0.002):
     return np.concatenate(pts), np.repeat(np.arange(len(centres)), [len(p) for p in pts])
 
 
-def _necks(points, above_points=None, origin=None):
+def _necks(points, above_points=None, origin=None, height=None):
     from supportnode.geometry.objects.faces import make_cells
 
     all_pts = points if above_points is None else np.concatenate([points, above_points])
@@ -60,7 +60,8 @@ def _necks(points, above_points=None, origin=None):
     face = np.full(len(cells.centroid), -1, np.int64)
     face[cells.of_point[: len(points)]] = 0  # the lids: one level face
     src, dst = cells.grid.adjacent_pairs()
-    out, cut = split_necks(cells, face, np.array([1.0]), src, dst, origin)
+    above = None if height is None else np.full(len(face), height)
+    out, cut = split_necks(cells, face, np.array([1.0]), src, dst, origin, above)
     return out[cells.of_point[: len(points)]], cut
 
 
@@ -71,6 +72,13 @@ def test_two_lids_touching_part_at_their_neck():
         assert np.bincount(part[truth == k]).max() >= 0.9 * (truth == k).sum()
     assert part[truth == 0][0] != part[truth == 1][0]
     assert cut.any()
+
+
+def test_flat_things_are_not_parted():
+    # Two sheets touching, 5 mm above the table: no sides to tell them by; lids 12 cm up are.
+    pts, _ = _lids([(0.0, -0.033), (0.0, 0.033)])
+    assert len(np.unique(_necks(pts, height=0.005)[0])) == 1
+    assert len(np.unique(_necks(pts, height=0.12)[0])) == 2
 
 
 def test_one_lid_or_a_box_top_stays_one_face():
