@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -113,7 +114,8 @@ def node_keys(tmp_path: Path) -> dict[str, Path]:
 def spinning_node(**node_keys):
     """A `Node` spinning in a thread over real sockets (``node.*`` keys overridden; by default
     no map messages, diagnostics every 0.2 s): yields (node,
-    its thread); stops it on exit."""
+    its thread) once it is ready (kernels warmed: on an empty numba cache the first node of a
+    session compiles them, 15-30 s, and publishes nothing meanwhile); stops it on exit."""
     from supportnode.node.node import Node
     from supportnode.params import DetectParams
 
@@ -123,6 +125,9 @@ def spinning_node(**node_keys):
         node.open()
         th = threading.Thread(target=node.spin, kwargs={"handle_signals": False}, daemon=True)
         th.start()
+        end = time.monotonic() + 180.0
+        while not node._ready and th.is_alive() and time.monotonic() < end:
+            time.sleep(0.05)
         try:
             yield node, th
         finally:
