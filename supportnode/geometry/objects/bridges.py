@@ -46,11 +46,13 @@ _NECK_RADIUS_CELLS = 1.0
 # a third of a lid's radius, two lids touching meet in a neck some 0.6 of their depth (the
 # cusp between them fills where it is narrower than a cell); a box's top has no neck at all.
 _NECK_RATIO = 0.7
+# ... and no neck deeper than this many cells (the cusp between two lids fills a few cells
+# at most; a shadow leaves a wide bridge).
+_NECK_DEEPEST = 3.0
 # ... and each part at least this share of its group's cells (two or three lids touching).
 _NECK_MIN_SHARE = 0.2
-# Shadows: sampled this many times along, at most this many cells long.
-_SHADOW_STEPS = 12
-_SHADOW_CELLS = 12
+# A plane's cell is hidden when its ray to the sensor meets a cell within this many cells.
+_HIDDEN_CELLS = 40
 # Level groups lower than this above their surface (metres) are not parted: the tops that
 # can hold something, as in stacks.py.
 _NECK_MIN_HEIGHT = 0.02
@@ -125,34 +127,46 @@ def _neck_parts(
     hi = ij.max(axis=0)
     occ = np.zeros((int(hi[0]) + 3, int(hi[1]) + 3), bool)  # a one-cell empty border
     occ[ij[:, 0] + 1, ij[:, 1] + 1] = True
-    # What stands on the face (a box on a book) notches its visible top without parting it,
-    # under it and in the shadow it casts from the sensor: those cells count as footprint.
-    over = _shadows(cells, above, top, origin) - lo
+    # What stands on the face (a box on a book) notches its visible top without parting it:
+    # the cells under it count as footprint.
+    over = ijk[above, :2] - lo
     on_top = (over >= 0).all(axis=1) & (over <= hi).all(axis=1)
     occ[over[on_top, 0] + 1, over[on_top, 1] + 1] = True
     u = ij + 0.5  # cell centres, the cell as the raster's unit
-    return split_raster(
-        fill_holes(occ), u[:, 0], u[:, 1], 1.0, _NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _NECK_RATIO
-    )
+    args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _NECK_RATIO, _NECK_DEEPEST)
+    cut = split_raster(fill_holes(occ), u[:, 0], u[:, 1], 1.0, *args)
+    if cut is None or origin is None or not origin[2] > top:
+        return cut
+    # So does what a taller thing in front hides from the sensor (a bottle's shadow on a
+    # book): a neck that closes once the plane's hidden cells are filled is none.
+    hidden = _hidden(cells, occ, lo, top, origin)
+    if not hidden.any():
+        return cut
+    return split_raster(fill_holes(occ | hidden), u[:, 0], u[:, 1], 1.0, *args)
 
 
-def _shadows(cells: Cells, above: np.ndarray, top: float, origin: np.ndarray | None) -> np.ndarray:
-    """(S, 2) int lattice x, y of the cells ``above`` and of the plane z = top they hide from
-    the sensor at origin: each one's shadow, sampled from it to where its ray meets the plane
-    (at most _SHADOW_CELLS cells long)."""
-    p = cells.centroid[above]
-    if origin is None or not origin[2] > top + cells.size or len(p) == 0:
-        xy = p[:, :2]
-    else:
-        # Along the ray from the sensor through p, on to the plane: t >= 1 (p is above it).
-        t = (top - origin[2]) / np.minimum(p[:, 2] - origin[2], -1e-9)
-        reach = (t - 1.0)[:, None] * (p[:, :2] - origin[:2])
-        length = np.linalg.norm(reach, axis=1, keepdims=True)
-        reach *= np.minimum(1.0, _SHADOW_CELLS * cells.size / np.maximum(length, 1e-12))
-        steps = np.linspace(0.0, 1.0, _SHADOW_STEPS)
-        xy = (p[:, None, :2] + steps[None, :, None] * reach[:, None, :]).reshape(-1, 2)
-    pad = cells.grid.pad
-    return np.floor((xy - cells.base[:2]) / cells.size).astype(np.int64) + pad
+def _hidden(
+    cells: Cells, occ: np.ndarray, lo: np.ndarray, top: float, origin: np.ndarray
+) -> np.ndarray:
+    """(H, W) bool: the empty cells of the raster occ (lattice x, y from lo, a one-cell
+    border) whose point on the plane z = top the sensor at origin cannot see: the ray to
+    the sensor meets an occupied cell within _HIDDEN_CELLS cells (from two cells up)."""
+    grid, size = cells.grid, cells.size
+    empty = np.argwhere(~occ)
+    ij = empty - 1 + lo
+    q = np.column_stack([cells.base[:2] + (ij - grid.pad + 0.5) * size, np.full(len(ij), top)])
+    d = origin - q
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    steps = np.arange(2.0, _HIDDEN_CELLS) * size
+    at = np.floor((q[:, None, :] + steps[None, :, None] * d[:, None, :] - cells.base) / size)
+    at = at.astype(np.int64) + grid.pad
+    inside = ((at >= 0) & (at < grid.dims)).all(axis=2)
+    key = (at[..., 0] * grid.dims[1] + at[..., 1]) * grid.dims[2] + at[..., 2]
+    cell_keys = (grid.ijk[:, 0] * grid.dims[1] + grid.ijk[:, 1]) * grid.dims[2] + grid.ijk[:, 2]
+    hit = (np.isin(key, cell_keys) & inside).any(axis=1)
+    out = np.zeros(occ.shape, bool)
+    out[empty[hit, 0], empty[hit, 1]] = True
+    return out
 
 
 def split_bridges(

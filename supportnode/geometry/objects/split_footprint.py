@@ -95,11 +95,12 @@ def split_raster(
     radius: float,
     min_points: int,
     ratio: float = _SPLIT_NECK_RATIO,
+    deepest: float = np.inf,
 ) -> np.ndarray | None:
     """`_split_footprint` on its footprint raster occ (H, W) bool (an empty border), the
     points at raster coordinates ux, uy (P,) (cells from the raster's corner): part index per
     point (P,), or None when the footprint has no neck (one shallower than ``radius`` or than
-    ``ratio`` times both parts' depth)."""
+    ``ratio`` times both parts' depth; none deeper than ``deepest`` cells is cut)."""
     # The taxicab distance to the edge bounds the Euclidean one from above and costs a tenth:
     # a footprint with no cell deep enough for a part (a ring of walls) stops here.
     if not _taxicab_deep(occ, cell, 1.5 * radius):
@@ -115,7 +116,7 @@ def split_raster(
     # on the whole raster of a room-sized cluster of walls.
     box = _true_box(depth > 0.5)
     depth_box = depth[box]
-    levels = _levels(top, cell, radius, ratio)
+    levels = [t for t in _levels(top, cell, radius, ratio) if t <= deepest]
     first, probed = _first_level(depth_box, levels, cell, radius)
     for k in range(first, len(levels)):
         t = levels[k]

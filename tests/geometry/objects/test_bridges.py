@@ -102,3 +102,29 @@ def test_a_notch_under_what_stands_on_the_face_is_no_neck():
     lid = top[box] + [0.0, 0.0, 0.05]  # the box's top, 5 cm above the book
     part, _ = _necks(top[~box], lid, origin=np.array([0.12, -0.6, 0.6]))
     assert len(np.unique(part)) == 1
+
+
+def _seen(points, origin, lo, hi):
+    """The points whose segment to the origin misses the box [lo, hi] (a slab test)."""
+    d = origin - points
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (lo - points) / d, (hi - points) / d
+    near = np.nanmax(np.minimum(t0, t1), axis=1)
+    far = np.nanmin(np.maximum(t0, t1), axis=1)
+    return ~((near <= far) & (far > 0) & (near < 1))
+
+
+def test_a_shadow_across_a_top_is_no_neck():
+    # A tall block in front of a book hides a band across most of the book's top from the
+    # sensor: what the sensor sees of the top is two lobes joined by a strip.
+    origin = np.array([-0.45, 0.085, 0.45])
+    lo, hi = np.array([-0.06, 0.03, -0.035]), np.array([-0.02, 0.14, 0.3])
+    g = np.arange(0.0, 0.24, 0.002)
+    x, y = np.meshgrid(g, g[:85])
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    top = top[_seen(top, origin, lo, hi)]
+    f = np.arange(0.03, 0.14, 0.002)
+    yy, zz = np.meshgrid(f, np.arange(0.0, 0.3, 0.002))
+    front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
+    assert len(np.unique(_necks(top, front)[0])) == 2  # the sensor unknown: a neck
+    assert len(np.unique(_necks(top, front, origin=origin)[0])) == 1
