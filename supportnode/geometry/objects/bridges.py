@@ -53,6 +53,7 @@ _NECK_DEEPEST = 3.0
 _NECK_MIN_SHARE = 0.2
 # A plane's cell is hidden when its ray to the sensor meets a cell within this many cells.
 _HIDDEN_CELLS = 40
+_HIDDEN_CHUNK = 16_384  # plane cells per pass
 # Level groups lower than this above their surface (metres) are not parted: the tops that
 # can hold something, as in stacks.py.
 _NECK_MIN_HEIGHT = 0.02
@@ -158,12 +159,19 @@ def _hidden(
     d = origin - q
     d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     steps = np.arange(2.0, _HIDDEN_CELLS) * size
-    at = np.floor((q[:, None, :] + steps[None, :, None] * d[:, None, :] - cells.base) / size)
-    at = at.astype(np.int64) + grid.pad
-    inside = ((at >= 0) & (at < grid.dims)).all(axis=2)
-    key = (at[..., 0] * grid.dims[1] + at[..., 1]) * grid.dims[2] + at[..., 2]
-    cell_keys = (grid.ijk[:, 0] * grid.dims[1] + grid.ijk[:, 1]) * grid.dims[2] + grid.ijk[:, 2]
-    hit = (np.isin(key, cell_keys) & inside).any(axis=1)
+    dims = grid.dims
+    cell_keys = np.sort((grid.ijk[:, 0] * dims[1] + grid.ijk[:, 1]) * dims[2] + grid.ijk[:, 2])
+    hit = np.zeros(len(q), bool)
+    for a in range(0, len(q), _HIDDEN_CHUNK):  # bounded temporaries on a large footprint
+        ray = (
+            q[a : a + _HIDDEN_CHUNK, None, :]
+            + steps[None, :, None] * d[a : a + _HIDDEN_CHUNK, None]
+        )
+        at = np.floor((ray - cells.base) / size).astype(np.int64) + grid.pad
+        inside = ((at >= 0) & (at < dims)).all(axis=2)
+        key = (at[..., 0] * dims[1] + at[..., 1]) * dims[2] + at[..., 2]
+        pos = np.minimum(np.searchsorted(cell_keys, key), len(cell_keys) - 1)
+        hit[a : a + _HIDDEN_CHUNK] = ((cell_keys[pos] == key) & inside).any(axis=1)
     out = np.zeros(occ.shape, bool)
     out[empty[hit, 0], empty[hit, 1]] = True
     return out
