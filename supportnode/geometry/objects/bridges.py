@@ -7,7 +7,7 @@ parts. LCCP (Stein et al., CVPR 2014) has the same blind spot; CPC (Schoeler et 
 2015) cuts such a face along a plane. Here a face that meets two faces convexly while they
 meet each other along a strongly concave boundary is a bridge: each of its cells goes to
 the side it is nearer to through the face (the cut runs between them), and the vote
-(`convexity._vote`) decides on the pooled boundary. A cut across a long face (one object's
+(`votes.vote_segments`) decides on the pooled boundary. A cut across a long face (one object's
 L-shaped top) counts its many flat links, and joins again unless the crease outweighs it.
 
 Where an occlusion hides the crease (two cans seen so that one hides their contact, three in

@@ -27,6 +27,7 @@ from supportnode.geometry.objects.faces import (
     window_normals,
 )
 from supportnode.geometry.objects.stacks import cut_stacks
+from supportnode.geometry.objects.votes import CONCAVE_SHARE, absorb_small, vote_segments
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.components import label_edges
 from supportnode.kernels.groups import label_boxes
@@ -44,16 +45,10 @@ _FLAT_NOISE = 2.0  # times a noisy plane's own surface variation
 _FACE_DEG = 15.0
 _FACE_SIGMAS = 3.0
 _FACE_MIN_POINTS = 20
-# LCCP's tolerance for noise in the convexity measure (n_a - n_b) . d, and the share of a
-# boundary's links that must be concave for it to separate its faces.
+# LCCP's tolerance for noise in the convexity measure (n_a - n_b) . d.
 _CONVEX_TOL = 0.05
 # The band over a surface that measured no noise (the seed method), metres.
 _FALLBACK_BAND = 0.005
-_CONCAVE_SHARE = 0.3
-# Boundaries of at least this many links join faces first; then segments join across all
-# their boundaries pooled, for up to this many rounds (see _vote).
-_STRONG_LINKS = 20
-_VOTE_ROUNDS = 4
 
 
 def convex_segments(
@@ -112,7 +107,7 @@ def convex_segments(
             seg = cut_stacks(
                 cells.centroid, count, cell_above, face, up, seg, src, dst, clearance, min_points
             )
-        seg = _absorb_small(seg, cells.moments[:, 0], src, dst, min_points)
+        seg = absorb_small(seg, cells.moments[:, 0], src, dst, min_points)
     return seg[cells.of_point]
 
 
@@ -177,7 +172,7 @@ def _join_faces(
     concave[on] = (convexity < -_CONVEX_TOL) & ~smooth
     concave |= on & neck  # across a neck of a level face
     # A face that bridges a crease is parted; the links across the cut are flat (one plane).
-    face = split_bridges(face, src, dst, concave, _CONCAVE_SHARE)
+    face = split_bridges(face, src, dst, concave, CONCAVE_SHARE)
     fa, fb = face[src], face[dst]
     on = (fa >= 0) & (fb >= 0) & (fa != fb)
     n_face = int(face.max()) + 1
@@ -185,66 +180,8 @@ def _join_faces(
     pair, inv = np.unique(lo * n_face + hi, return_inverse=True)
     links = np.bincount(inv.reshape(-1), minlength=len(pair))
     n_concave = np.bincount(inv.reshape(-1), weights=concave[on], minlength=len(pair))
-    seg_of_face = _vote(n_face, pair // n_face, pair % n_face, links, n_concave)
+    seg_of_face = vote_segments(n_face, pair // n_face, pair % n_face, links, n_concave)
     return np.where(face >= 0, seg_of_face[np.maximum(face, 0)], -1), face
-
-
-def _vote(
-    n: int, a: np.ndarray, b: np.ndarray, links: np.ndarray, concave: np.ndarray
-) -> np.ndarray:
-    """(n,) segment of each face from its boundaries (a, b, links, concave links; (B,)).
-
-    Long boundaries speak first: faces joined across those of at least _STRONG_LINKS links
-    that are mostly convex. The segments so made then join across all that lies between
-    them, their boundaries' links pooled: a crease of a few links (where a box's face meets
-    the corner of the box it stands on) cannot join what a long concave crease parts."""
-    convex = concave < _CONCAVE_SHARE * links
-    strong = links >= _STRONG_LINKS
-    seg = label_edges(n, a[strong & convex], b[strong & convex])
-    for _ in range(_VOTE_ROUNDS):
-        sa, sb = np.minimum(seg[a], seg[b]), np.maximum(seg[a], seg[b])
-        between = sa != sb
-        if not between.any():
-            break
-        key, inv = np.unique(sa[between] * n + sb[between], return_inverse=True)
-        pooled = np.bincount(inv.reshape(-1), weights=links[between])
-        pooled_concave = np.bincount(inv.reshape(-1), weights=concave[between])
-        join = pooled_concave < _CONCAVE_SHARE * pooled
-        if not join.any():
-            break
-        seg = label_edges(n, key[join] // n, key[join] % n)[seg]
-    return seg
-
-
-def _absorb_small(
-    seg: np.ndarray, count: np.ndarray, src: np.ndarray, dst: np.ndarray, min_points: int
-) -> np.ndarray:
-    """Segments of fewer than ``min_points`` points (count: (F,) points per cell) join the
-    other segment they share the most links with (slivers along a crease); those with no
-    such neighbour stay."""
-    on = seg >= 0
-    if not on.any():
-        return seg
-    size = np.bincount(seg[on], weights=count[on])
-    small = size < min_points
-    if not small.any():
-        return seg
-    a = np.concatenate([seg[src], seg[dst]])
-    b = np.concatenate([seg[dst], seg[src]])
-    pick = (a >= 0) & (b >= 0) & (a != b)
-    a, b = a[pick], b[pick]
-    pick = small[a] & ~small[b]
-    if not pick.any():
-        return seg
-    n = len(small)
-    pair, votes = np.unique(a[pick] * n + b[pick], return_counts=True)
-    order = np.lexsort((-votes, pair // n))
-    first = np.ones(len(order), bool)
-    first[1:] = (pair // n)[order][1:] != (pair // n)[order][:-1]
-    best = pair[order][first]
-    target = np.arange(n)
-    target[best // n] = best % n
-    return np.where(on, target[np.maximum(seg, 0)], -1)
 
 
 def cluster_convex(
