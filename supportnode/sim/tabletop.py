@@ -95,6 +95,23 @@ def two_cans(gap: float = 0.01) -> Scene:
     return _on_table(_can("can_a", 0.0, -0.033 - gap / 2), _can("can_b", 0.0, 0.033 + gap / 2))
 
 
+def bottle_before_book(gap: float = 0.02, height: float = 0.25) -> Scene:
+    """A bottle `height` metres tall standing `gap` metres in front (-x) of a flat book: from
+    the front its shadow crosses the book's top."""
+    return _on_table(
+        _box("book", (0.24, 0.17, 0.035), 0.0, 0.0),
+        _can("bottle", -0.155 - gap, 0.0, radius=0.035, height=height),
+    )
+
+
+def box_on_book() -> Scene:
+    """A box 12 cm deep standing on a book's edge: the book's visible top is notched."""
+    return _on_table(
+        _box("book", (0.24, 0.17, 0.035), 0.0, 0.0),
+        _box("box", (0.08, 0.12, 0.05), 0.0, 0.025, z0=0.035),
+    )
+
+
 def mug() -> Scene:
     """A mug (an open cup with a bottom) with its handle to the side: one object."""
     z = TABLE_TOP + 0.0475

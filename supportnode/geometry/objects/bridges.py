@@ -57,7 +57,7 @@ _HIDDEN_CHUNK = 16_384  # plane cells per pass
 # Level groups lower than this above their surface (metres) are not parted: the tops that
 # can hold something, as in stacks.py.
 _NECK_MIN_HEIGHT = 0.02
-# Cells this many cells above a level group's height stand on it (or in front of it).
+# Cells this many cells above a level group's height stand on it (their footprint fills its own).
 _ABOVE_CELLS = 1.5
 
 
