@@ -95,6 +95,11 @@ def two_cans(gap: float = 0.01) -> Scene:
     return _on_table(_can("can_a", 0.0, -0.033 - gap / 2), _can("can_b", 0.0, 0.033 + gap / 2))
 
 
+def three_cans() -> Scene:
+    """Three cans of one height in a row, touching: their lids make one level face."""
+    return _on_table(_can("can_a", 0.0, -0.066), _can("can_b", 0.0, 0.0), _can("can_c", 0.0, 0.066))
+
+
 def bottle_before_book(gap: float = 0.02, height: float = 0.25) -> Scene:
     """A bottle `height` metres tall standing `gap` metres in front (-x) of a flat book: from
     the front its shadow crosses the book's top."""
@@ -168,6 +173,7 @@ CASES: dict[str, tuple[Callable[[], Scene], float, float]] = {
     "two_cans_1cm_apart": (two_cans, 1.0, 0.0),
     "two_cans_touching": (lambda: two_cans(0.0), 1.0, 0.0),
     "two_cans_touching_oblique": (lambda: two_cans(0.0), 1.0, -45.0),
+    "three_cans_in_a_row": (three_cans, 1.0, 0.0),
     "flat_book": (flat_book, 1.0, 0.0),
     "boxes_at_0.5m": (spread_boxes, 0.5, 0.0),
     "boxes_at_1.5m": (spread_boxes, 1.5, 0.0),

@@ -30,7 +30,7 @@ from supportnode.kernels.components import label_edges
 from supportnode.kernels.footprint import fill_holes
 
 # A boundary is a crease when it has at least this many links and this share of them concave.
-_CREASE_LINKS = 20
+_CREASE_LINKS = 10
 _CREASE_SHARE = 0.5
 # A face bridges two creased faces when it meets each along at least this many links.
 _BRIDGE_LINKS = 5
@@ -99,12 +99,17 @@ def split_necks(
         if cell_above is not None and np.median(cell_above[rows]) < _NECK_MIN_HEIGHT:
             continue  # a flat thing (a sheet, a mat): no sides to tell its pieces by
         top = float(np.median(centroid[rows, 2]))
-        cut = _neck_parts(cells, centroid[:, 2] > top + _ABOVE_CELLS * size, rows, top, origin)
-        if cut is None or np.bincount(cut).min() < _NECK_MIN_SHARE * len(rows):
-            continue  # a corner behind what stands on the face is no lid of its own
-        for k in range(1, int(cut.max()) + 1):
-            part[rows[cut == k]] = fresh
-            fresh += 1
+        above = centroid[:, 2] > top + _ABOVE_CELLS * size
+        todo = [rows]
+        while todo:  # three lids in a row part at one neck, then at the other
+            sub = todo.pop()
+            cut = _neck_parts(cells, above, sub, top, origin)
+            if cut is None or np.bincount(cut).min() < _NECK_MIN_SHARE * len(rows):
+                continue  # a corner behind what stands on the face is no lid of its own
+            todo.extend(sub[cut == k] for k in range(int(cut.max()) + 1))
+            for k in range(1, int(cut.max()) + 1):
+                part[sub[cut == k]] = fresh
+                fresh += 1
     if fresh == n:
         return face, np.zeros(len(src), bool)
     # A face on both sides of a neck becomes one face per side.

@@ -13,6 +13,9 @@ CONCAVE_SHARE = 0.3
 # their boundaries pooled, for up to this many rounds (see vote_segments).
 _STRONG_LINKS = 20
 _VOTE_ROUNDS = 4
+# A boundary of at least _STRONG_LINKS links, this share of them concave, is a crease that
+# no chain of joins may cross.
+_CREASE_SHARE = 0.5
 
 
 def vote_segments(
@@ -26,6 +29,7 @@ def vote_segments(
     the corner of the box it stands on) cannot join what a long concave crease parts."""
     convex = concave < CONCAVE_SHARE * links
     strong = links >= _STRONG_LINKS
+    crease = strong & (concave >= _CREASE_SHARE * links)
     seg = label_edges(n, a[strong & convex], b[strong & convex])
     for _ in range(_VOTE_ROUNDS):
         sa, sb = np.minimum(seg[a], seg[b]), np.maximum(seg[a], seg[b])
@@ -38,8 +42,50 @@ def vote_segments(
         join = pooled_concave < CONCAVE_SHARE * pooled
         if not join.any():
             break
-        seg = label_edges(n, key[join] // n, key[join] % n)[seg]
+        ca, cb = seg[a[crease]], seg[b[crease]]
+        apart = (ca[ca != cb], cb[ca != cb])
+        seg = _join(n, key[join] // n, key[join] % n, pooled[join], apart)[seg]
     return seg
+
+
+def _join(
+    n: int,
+    a: np.ndarray,
+    b: np.ndarray,
+    weight: np.ndarray,
+    apart: tuple[np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """(n,) component of each node joined by the pairs (a, b) (J,), except that no component
+    may hold both ends of a pair in ``apart`` (two (K,) arrays: faces on either side of a
+    long concave crease). The joins are taken heaviest first; one that would put a crease
+    inside a component is skipped: a sliver in the cusp between two cans meets each can
+    convexly, and joining both joins would join across the crease between them."""
+    if len(apart[0]) == 0:
+        return label_edges(n, a, b)
+    parent = list(range(n))
+    members: list[set[int]] = [{i} for i in range(n)]
+    avoid: list[set[int]] = [set() for _ in range(n)]
+    for x, y in zip(apart[0].tolist(), apart[1].tolist(), strict=True):
+        avoid[x].add(y)
+        avoid[y].add(x)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for k in np.argsort(-weight, kind="stable").tolist():
+        x, y = root(int(a[k])), root(int(b[k]))
+        if x == y or avoid[x] & members[y]:
+            continue
+        if len(members[x]) < len(members[y]):
+            x, y = y, x
+        parent[y] = x
+        members[x] |= members[y]
+        avoid[x] |= avoid[y]
+    roots = np.array([root(i) for i in range(n)], np.int64)
+    return np.unique(roots, return_inverse=True)[1].reshape(-1)
 
 
 def absorb_small(

@@ -43,12 +43,15 @@ def test_no_faces_no_links():
 
 
 def _lids(centres, radius=0.033, spacing=0.002):
-    """Points of level discs at z = 0 (lids seen from above), one label per disc."""
-    g = np.arange(-radius, radius + 1e-9, spacing)
-    x, y = np.meshgrid(g, g)
-    disc = np.column_stack([x.ravel(), y.ravel()])
-    disc = disc[(disc**2).sum(axis=1) <= radius**2]
-    pts = [np.column_stack([disc + c, np.zeros(len(disc))]) for c in centres]
+    """Points of level discs at z = 0 (lids seen from above), one label per disc; radius, metres,
+    one for all or one per disc."""
+    pts = []
+    for c, r in zip(centres, np.broadcast_to(radius, len(centres)), strict=True):
+        g = np.arange(-r, r + 1e-9, spacing)
+        x, y = np.meshgrid(g, g)
+        disc = np.column_stack([x.ravel(), y.ravel()])
+        disc = disc[(disc**2).sum(axis=1) <= r**2]
+        pts.append(np.column_stack([disc + c, np.zeros(len(disc))]))
     return np.concatenate(pts), np.repeat(np.arange(len(centres)), [len(p) for p in pts])
 
 
@@ -72,6 +75,15 @@ def test_two_lids_touching_part_at_their_neck():
         assert np.bincount(part[truth == k]).max() >= 0.9 * (truth == k).sum()
     assert part[truth == 0][0] != part[truth == 1][0]
     assert cut.any()
+
+
+def test_three_lids_in_a_row_part_at_both_necks():
+    # Lids of two sizes: the necks part at different depths, one after the other.
+    pts, truth = _lids([(0.0, -0.08), (0.0, 0.0), (0.0, 0.06)], radius=[0.05, 0.03, 0.03])
+    part, _ = _necks(pts)
+    assert len(np.unique(part)) == 3
+    for k in (0, 1, 2):
+        assert np.bincount(part[truth == k]).max() >= 0.9 * (truth == k).sum()
 
 
 def test_flat_things_are_not_parted():
