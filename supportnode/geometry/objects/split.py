@@ -64,16 +64,21 @@ def _split_touching(
     # tried (a room-sized raster, a third of a noisy map's objects stage). As the convex
     # method, it stays whole.
     room = (hi - lo).max(axis=1) > _MAX_EXTENT
-    for c in np.flatnonzero(nonempty & _may_split(shape, cell, radius) & ~room):
+    tried = np.flatnonzero(nonempty & _may_split(shape, cell, radius) & ~room)
+    bottom = np.full(n + 1, -np.inf)  # the last: no cluster
+    bottom[:n][nonempty] = np.minimum.reduceat(cp[order[bounds[1] :], 2], starts)[nonempty]
+    point_bottom = bottom[lab]  # (M,) the lowest height of each point's cluster
+    for c in tried:
         idx = order[bounds[c + 1] : bounds[c + 2]]
         extent = float((hi[c] - lo[c]).max())
+        above = _standing_on(cp, point_bottom, idx, lo[c], hi[c], params.cluster_cell)
         if memo is None:
-            parts, n_parts, how = _split_one(cp, idx, all_xy, extent, params, cell, radius)
-        else:  # a pure function of the cluster's points (its extent is theirs)
+            parts, n_parts, how = _split_one(cp, idx, all_xy, extent, params, cell, radius, above)
+        else:  # a pure function of the cluster's points and of what stands on it
             parts, n_parts, how = memo.get(
                 "split",
-                np.take(cp, idx, axis=0),
-                functools.partial(_split_one, cp, idx, all_xy, extent, params, cell, radius),
+                np.take(cp, np.concatenate([idx, above]), axis=0),
+                functools.partial(_split_one, cp, idx, all_xy, extent, params, cell, radius, above),
             )
         if how is not None:
             stats[how] += 1
@@ -88,6 +93,28 @@ def _split_touching(
     return out
 
 
+def _standing_on(
+    cp: np.ndarray,
+    point_bottom: np.ndarray,
+    idx: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    reach: float,
+) -> np.ndarray:
+    """(Q,) indices of the points of the other clusters standing on the cluster of points
+    cp[idx]: those within its x, y box [lo, hi] (2,) of clusters whose lowest point
+    (point_bottom (M,), metres, per point) lies above its median height (a box on a book, not
+    a can beside it) and at most ``reach`` metres above its top (not what stands on the shelf
+    board above)."""
+    z = cp[idx, 2]
+    pb = point_bottom
+    cand = np.flatnonzero((pb >= np.median(z)) & (pb <= z.max() + reach))
+    if len(cand) == 0:
+        return cand
+    x, y = cp[cand, 0], cp[cand, 1]
+    return cand[(x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])]
+
+
 def _split_one(
     cp: np.ndarray,
     idx: np.ndarray,
@@ -96,12 +123,15 @@ def _split_one(
     params: ObjectParams,
     cell: float,
     radius: float,
+    above: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, str | None]:
     """Parts (P,) of the cluster of points cp[idx] (x, y footprint extent in metres), their
     number, and the stats key of the rule that cut it ("step_splits", "concave_splits"; None
-    for a neck or no cut)."""
+    for a neck or no cut). above: (Q,) indices of the points standing on it (their cells
+    fill its footprint), or None."""
     xy_c = np.take(all_xy, idx, axis=0)
-    parts = _split_recursive(xy_c, cell, radius, params.min_points, _SPLIT_DEPTH)
+    fill = None if above is None or len(above) == 0 else np.take(all_xy, above, axis=0)
+    parts = _split_recursive(xy_c, cell, radius, params.min_points, _SPLIT_DEPTH, fill)
     n_parts = int(parts.max()) + 1
     if n_parts >= 2 or extent > _STEP_MAX_EXTENT:
         return parts, n_parts, None

@@ -20,7 +20,7 @@ from supportnode.geometry.objects.raster import (
     _taxicab_deep,
     _true_box,
 )
-from supportnode.kernels.footprint import footprint_raster, label8
+from supportnode.kernels.footprint import close3, fill_holes, footprint_raster, label8
 
 # A split part must hold at least this fraction of the cluster's footprint cells.
 _SPLIT_MIN_FRACTION = 0.15
@@ -44,24 +44,31 @@ def _may_split(shape: np.ndarray, cell: float, radius: float) -> np.ndarray:
 
 
 def _split_recursive(
-    xy: np.ndarray, cell: float, radius: float, min_points: int, depth: int
+    xy: np.ndarray,
+    cell: float,
+    radius: float,
+    min_points: int,
+    depth: int,
+    fill: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(P,) part index per point of xy (P, 2): a row of three barrels splits twice."""
-    parts = _split_footprint(xy, cell, radius, min_points) if depth > 0 else None
+    """(P,) part index per point of xy (P, 2): a row of three barrels splits twice. fill:
+    (Q, 2) points, metres, whose cells count as footprint where they fall within xy's box
+    (what stands on the cluster), or None."""
+    parts = _split_footprint(xy, cell, radius, min_points, fill) if depth > 0 else None
     if parts is None:
         return np.zeros(len(xy), dtype=np.int64)
     out = np.empty(len(xy), dtype=np.int64)
     n = 0
     for k in range(int(parts.max()) + 1):  # two or three parts
         sel = np.flatnonzero(parts == k)
-        sub = _split_recursive(np.take(xy, sel, axis=0), cell, radius, min_points, depth - 1)
+        sub = _split_recursive(np.take(xy, sel, axis=0), cell, radius, min_points, depth - 1, fill)
         out[sel] = sub + n
         n += int(sub.max()) + 1
     return out
 
 
 def _split_footprint(
-    xy: np.ndarray, cell: float, radius: float, min_points: int
+    xy: np.ndarray, cell: float, radius: float, min_points: int, fill: np.ndarray | None = None
 ) -> np.ndarray | None:
     """Part index per point (P,) when the footprint of xy (P, 2) falls apart, else None.
 
@@ -84,7 +91,37 @@ def _split_footprint(
     # would run numpy's inner loop over 2 elements.
     ux = (xy[:, 0] - lo[0]) / cell
     uy = (xy[:, 1] - lo[1]) / cell
-    return split_raster(_footprint_raster(ux, uy, shape, cell), ux, uy, cell, radius, min_points)
+    occ = _footprint_raster(ux, uy, shape, cell)
+    cut = split_raster(occ, ux, uy, cell, radius, min_points)
+    if cut is None or fill is None or len(fill) == 0:
+        return cut
+    # A neck that closes once what stands on the cluster is filled in is none (a box on a
+    # book); the fill only vetoes a cut (a thicker footprint can hold parts of its own).
+    filled = _fill_notches(occ, fill, lo, shape, cell)
+    return None if split_raster(filled, ux, uy, cell, radius, min_points) is None else cut
+
+
+def _fill_notches(
+    occ: np.ndarray, fill: np.ndarray, lo: np.ndarray, shape: np.ndarray, cell: float
+) -> np.ndarray:
+    """The footprint occ (H, W) with the cells under the points fill (Q, 2), metres, set
+    where they lie between footprint cells along their row or column: what stands on the
+    cluster (a box on a book) notches its visible top without parting it, but does not widen
+    it."""
+    hi = lo + (shape - 3) * cell
+    fx, fy = fill[:, 0], fill[:, 1]
+    inside = (fx >= lo[0]) & (fx <= hi[0]) & (fy >= lo[1]) & (fy <= hi[1])
+    under = np.zeros(occ.shape, bool)
+    under[
+        ((fx[inside] - lo[0]) / cell).astype(np.int64) + 1,
+        ((fy[inside] - lo[1]) / cell).astype(np.int64) + 1,
+    ] = True
+    between = np.zeros(occ.shape, bool)
+    for axis in (0, 1):
+        before = np.logical_or.accumulate(occ, axis=axis)
+        after = np.flip(np.logical_or.accumulate(np.flip(occ, axis), axis=axis), axis)
+        between |= before & after
+    return fill_holes(occ | (close3(under) & between), int(_SPLIT_MAX_HOLE / cell**2))
 
 
 def split_raster(
