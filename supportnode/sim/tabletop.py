@@ -128,6 +128,19 @@ def mug() -> Scene:
     )
 
 
+def bottle() -> Scene:
+    """A bottle: body, sloped shoulder and a narrow neck meeting the shoulder in a concave
+    crease (as a box meets the box it stands on); the neck rests on nothing level: one
+    object."""
+    z = TABLE_TOP
+    return _on_table(
+        f"{{kind: group, name: bottle, role: object, object: bottle, xyz: [0, 0, {z}], children: ["
+        "{kind: cylinder, radius: 0.035, height: 0.17, xyz: [0, 0, 0.085]}, "
+        "{kind: cone, radius: 0.035, height: 0.05, xyz: [0, 0, 0.195]}, "
+        "{kind: cylinder, radius: 0.012, height: 0.04, xyz: [0, 0, 0.225]}]}"
+    )
+
+
 def bowl() -> Scene:
     """An open bowl on its flat base: one object."""
     z = TABLE_TOP + 0.03
@@ -170,6 +183,7 @@ CASES: dict[str, tuple[Callable[[], Scene], float, float]] = {
     "can_against_box": (can_against_box, 1.0, 30.0),
     "mug": (mug, 1.0, -20.0),
     "bowl": (bowl, 1.0, 0.0),
+    "bottle": (bottle, 1.0, 0.0),
     "two_cans_1cm_apart": (two_cans, 1.0, 0.0),
     "two_cans_touching": (lambda: two_cans(0.0), 1.0, 0.0),
     "two_cans_touching_oblique": (lambda: two_cans(0.0), 1.0, -45.0),

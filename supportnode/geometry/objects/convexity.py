@@ -26,6 +26,7 @@ from supportnode.geometry.objects.faces import (
     orient,
     window_normals,
 )
+from supportnode.geometry.objects.floating import join_floating
 from supportnode.geometry.objects.stacks import cut_stacks
 from supportnode.geometry.objects.votes import CONCAVE_SHARE, absorb_small, vote_segments
 from supportnode.geometry.surfaces import Surface
@@ -104,6 +105,7 @@ def convex_segments(
         if cell_above is not None:
             up = np.abs(_face_normals(cells, face)[:, 2])
             clearance = max(1.5 * cell, _FACE_SIGMAS * sigma)
+            seg = join_floating(cells.centroid, cell_above, face, up, seg, src, dst)
             seg = cut_stacks(
                 cells.centroid, count, cell_above, face, up, seg, src, dst, clearance, min_points
             )

@@ -96,6 +96,7 @@ TABLETOPS = {
     "can_against_box": 0.9,
     "mug": 0.9,  # with its handle: one object
     "bowl": 0.8,  # its inside curves gently: one object
+    "bottle": 0.9,  # its neck meets the shoulder concavely but rests on nothing level
     "two_cans_1cm_apart": 0.9,
     "two_cans_touching": 0.9,  # their lids touch too: one level face, parted (bridges.py)
     "two_cans_touching_oblique": 0.9,  # one hides their crease: parted at the lids' neck
