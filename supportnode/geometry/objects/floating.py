@@ -5,7 +5,7 @@ box meets the box it stands on). A box standing on a box rests on the lower box'
 top; the neck rests on nothing: its lowest cells are well above the surface, and the cells
 it meets below it lie on a sloped face (the shoulder). A segment that neither comes down to
 its surface nor meets a level face below it cannot stand there by itself, so it joins the
-segment below it it shares the most links with. Pure: numpy in, labels out.
+segment below it whose sloped faces it meets along the most links. Pure: numpy in, labels out.
 """
 
 from __future__ import annotations
@@ -21,6 +21,9 @@ _LEVEL_DEG = 15.0
 # A segment rests on a neighbour when at least this many links lead down to the
 # neighbour's level cells.
 _REST_LINKS = 3
+# It is held by a neighbour when at least this many links lead down to the neighbour's
+# sloped cells.
+_HELD_LINKS = 5
 # It stands above a neighbour whose highest cell is at most this above its lowest, metres.
 _BELOW = 0.01
 
@@ -34,8 +37,8 @@ def join_floating(
     src: np.ndarray,
     dst: np.ndarray,
 ) -> np.ndarray:
-    """(F,) segment of each cell, the segments held by nothing joined to the neighbour they
-    share the most links with (see the module). centroid: (F, 3) cells' centroids, metres, z
+    """(F,) segment of each cell, the segments held by nothing joined to the neighbour whose
+    sloped faces below them they meet along the most links (see the module). centroid: (F, 3) cells' centroids, metres, z
     up; above: (F,) their height above the surface under them (inf over none); face: (F,)
     face of each cell (-1: none); face_up: (n_faces,) |z| of each face's normal; seg: (F,)
     segment of each cell (-1: none); src, dst: (L,) adjacent cells."""
@@ -56,8 +59,9 @@ def join_floating(
     a, b, sa, sb = a[between], b[between], sa[between], sb[between]
     level = face_up >= np.cos(np.radians(_LEVEL_DEG))
     fb = face[b]
-    under = (fb >= 0) & level[np.maximum(fb, 0)] & (centroid[b, 2] < centroid[a, 2])
-    rests = np.bincount(sa[under], minlength=n) >= _REST_LINKS
+    lower = (fb >= 0) & (centroid[b, 2] < centroid[a, 2])
+    on_level = level[np.maximum(fb, 0)]
+    rests = np.bincount(sa[lower & on_level], minlength=n) >= _REST_LINKS
     floating = aloft & ~rests
     # It joins what it stands above: its lowest cell no lower than that one's highest (a
     # neck on a shoulder), not what it stands beside (a cup's inner wall beside its outer).
@@ -67,10 +71,15 @@ def join_floating(
     np.maximum.at(top, seg[on], centroid[on, 2])
     # ... and what holds it stands: on its surface or on a level face (a row of things over
     # a shelf board the surfaces missed floats as a whole, and proves nothing).
-    pick = floating[sa] & ~floating[sb] & (bottom[sa] >= top[sb] - _BELOW)
+    # The links that show it held: down to that one's sloped faces (a neck's whole rim on a
+    # shoulder), not a link or two where the view shows little of what is under it.
+    pick = lower & ~on_level & floating[sa] & ~floating[sb] & (bottom[sa] >= top[sb] - _BELOW)
     if not pick.any():
         return seg
     pair, links = np.unique(sa[pick] * n + sb[pick], return_counts=True)
+    pair, links = pair[links >= _HELD_LINKS], links[links >= _HELD_LINKS]
+    if len(pair) == 0:
+        return seg
     order = np.lexsort((-links, pair // n))
     first = order[np.r_[True, (pair // n)[order][1:] != (pair // n)[order][:-1]]]
     best = pair[first]

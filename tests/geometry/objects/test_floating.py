@@ -9,8 +9,8 @@ from supportnode.geometry.objects.floating import join_floating
 
 def _scene(lower_face_level: bool, upper_low: float = 0.2):
     """Two segments of cells in a column: a lower one (cells 0-4, z 0 to 0.16, its top cell on
-    face 1) and an upper one (cells 5-9, from ``upper_low`` up, face 2). Cells 4 and 5 link
-    with three links' worth of pairs. Face 1 is level or sloped."""
+    face 1) and an upper one (cells 5-9, from ``upper_low`` up, face 2). The upper segment's
+    lowest cells meet cell 4 along five links. Face 1 is level or sloped."""
     z = np.r_[np.linspace(0.0, 0.16, 5), upper_low + np.linspace(0.0, 0.04, 5)]
     centroid = np.column_stack([np.zeros(10), np.zeros(10), z])
     above = z.copy()  # the surface at z = 0
