@@ -139,7 +139,8 @@ def cluster_objects(
     seg.stats = {"components": n}
     if params.method != "voxel" or len(claimed):
         voxels = None
-    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels)
+    origin = None if sensor_origin is None else np.asarray(sensor_origin, np.float64)
+    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels, origin)
 
 
 def convex_components(
@@ -237,7 +238,7 @@ def split_objects(
     known = components._supports
     split = lab
     if params.split_touching and len(lab):
-        split = _split_touching(cp, lab, params, stats, memo)
+        split = _split_touching(cp, lab, params, stats, memo, components._origin)
     t2 = time.perf_counter()
     if stats["merged_splits"] == 0:
         # Nothing split (the usual case): the clusters are the components, in their order.

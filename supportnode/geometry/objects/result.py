@@ -108,3 +108,5 @@ class Components:
     claimed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
     # (M,) each candidate's voxel of the clustering grid (voxel method, no feet claimed).
     _voxels: np.ndarray | None = field(default=None, repr=False)
+    # (3,) the sensor in the points' frame, when known (what it cannot see fills footprints).
+    _origin: np.ndarray | None = field(default=None, repr=False)

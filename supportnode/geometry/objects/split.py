@@ -21,22 +21,30 @@ from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.arrays import _group_by_label
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.split_concave import _CONCAVE_MAX_EXTENT, _split_concave
-from supportnode.geometry.objects.split_footprint import _may_split, _split_recursive
+from supportnode.geometry.objects.split_footprint import Fill, _may_split, _split_recursive
 from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_step
 from supportnode.params import ObjectParams
 
 # Footprint raster cell = voxel_size / this (1 cm at the default 3 cm voxels).
 _SPLIT_CELL_DIVISOR = 3.0
+# A cluster is a flat thing when this share of its points lie within half a cell of its top.
+_FLAT_TOP = 0.7
 # Recursion depth of splitting: up to 2**depth parts per cluster.
 _SPLIT_DEPTH = 3
 
 
 def _split_touching(
-    cp: np.ndarray, lab: np.ndarray, params: ObjectParams, stats: dict, memo: Memo | None = None
+    cp: np.ndarray,
+    lab: np.ndarray,
+    params: ObjectParams,
+    stats: dict,
+    memo: Memo | None = None,
+    origin: np.ndarray | None = None,
 ) -> np.ndarray:
     """Cut clusters whose x, y footprint has large parts joined by a neck (see _split_footprint),
     or else whose top steps between two flat levels side by side (see _split_step). memo: the
-    cuts of clusters seen with the same points in the previous detection."""
+    cuts of clusters seen with the same points in the previous detection; origin: (3,) the
+    sensor, metres, or None (what other clusters hide from it fills a footprint's notches)."""
     cell = params.cluster_cell / _SPLIT_CELL_DIVISOR
     radius = params.split_neck_width / 2.0
     n = int(lab.max()) + 1
@@ -71,14 +79,19 @@ def _split_touching(
     for c in tried:
         idx = order[bounds[c + 1] : bounds[c + 2]]
         extent = float((hi[c] - lo[c]).max())
-        above = _standing_on(cp, point_bottom, idx, lo[c], hi[c], params.cluster_cell)
-        if memo is None:
-            parts, n_parts, how = _split_one(cp, idx, all_xy, extent, params, cell, radius, above)
-        else:  # a pure function of the cluster's points and of what stands on it
+        fill = functools.partial(_fill_xy, cp, lab, idx, point_bottom, lo[c], hi[c], params, origin)
+        if memo is None:  # the fill is found only for a cluster with a neck
+            parts, n_parts, how = _split_one(
+                cp, idx, all_xy, extent, params, cell, radius, functools.cache(fill)
+            )
+        else:  # a pure function of the cluster's points and of what fills its notches
+            fill_xy = fill()
             parts, n_parts, how = memo.get(
                 "split",
-                np.take(cp, np.concatenate([idx, above]), axis=0),
-                functools.partial(_split_one, cp, idx, all_xy, extent, params, cell, radius, above),
+                np.concatenate([np.take(all_xy, idx, axis=0), fill_xy]),
+                functools.partial(
+                    _split_one, cp, idx, all_xy, extent, params, cell, radius, fill_xy
+                ),
             )
         if how is not None:
             stats[how] += 1
@@ -115,6 +128,50 @@ def _standing_on(
     return cand[(x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])]
 
 
+def _fill_xy(
+    cp: np.ndarray,
+    lab: np.ndarray,
+    idx: np.ndarray,
+    point_bottom: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    params: ObjectParams,
+    origin: np.ndarray | None,
+) -> np.ndarray:
+    """(Q, 2) x, y, metres, that fill the notches of the footprint of cluster cp[idx] (box
+    [lo, hi] (2,)): what stands on it (see _standing_on) and, with the sensor at origin (3,),
+    the points of the other clusters higher than its top seen along their rays down to its
+    top's height (what they hide of it: a small box's shadow across a book)."""
+    above = _standing_on(cp, point_bottom, idx, lo, hi, params.cluster_cell)
+    fill = np.take(cp[:, :2], above, axis=0)
+    z = cp[idx, 2]
+    z_top = float(np.max(z))
+    if origin is None or not origin[2] > z_top:
+        return fill
+    # A band hidden across a flat thing's top (a book: most of what is seen of it is its top)
+    # continues that plane; between two things behind an occluder it tells nothing.
+    if np.mean(z >= np.percentile(z, 95) - params.cluster_cell / 2) < _FLAT_TOP:
+        return fill
+    # Only what lies between the sensor and the box, in x, y, can hide part of it.
+    near = np.minimum(lo, origin[:2]), np.maximum(hi, origin[:2])
+    x, y = cp[:, 0], cp[:, 1]
+    high = np.flatnonzero(
+        (cp[:, 2] > z_top)
+        & (x >= near[0][0])
+        & (x <= near[1][0])
+        & (y >= near[0][1])
+        & (y <= near[1][1])
+        & (lab >= 0)
+        & (lab != lab[idx[0]])
+    )
+    q = np.take(cp, high, axis=0)
+    t = (origin[2] - z_top) / (origin[2] - q[:, 2])  # along the ray from the sensor, >= 1
+    shadow = origin[:2] + t[:, None] * (q[:, :2] - origin[:2])
+    sx, sy = shadow[:, 0], shadow[:, 1]
+    inside = (sx >= lo[0]) & (sx <= hi[0]) & (sy >= lo[1]) & (sy <= hi[1])
+    return np.concatenate([fill, shadow[inside]])
+
+
 def _split_one(
     cp: np.ndarray,
     idx: np.ndarray,
@@ -123,14 +180,13 @@ def _split_one(
     params: ObjectParams,
     cell: float,
     radius: float,
-    above: np.ndarray | None = None,
+    fill: Fill = None,
 ) -> tuple[np.ndarray, int, str | None]:
     """Parts (P,) of the cluster of points cp[idx] (x, y footprint extent in metres), their
     number, and the stats key of the rule that cut it ("step_splits", "concave_splits"; None
-    for a neck or no cut). above: (Q,) indices of the points standing on it (their cells
-    fill its footprint), or None."""
+    for a neck or no cut). fill: what fills its footprint's notches (see _fill_xy and
+    split_footprint.Fill)."""
     xy_c = np.take(all_xy, idx, axis=0)
-    fill = None if above is None or len(above) == 0 else np.take(all_xy, above, axis=0)
     parts = _split_recursive(xy_c, cell, radius, params.min_points, _SPLIT_DEPTH, fill)
     n_parts = int(parts.max()) + 1
     if n_parts >= 2 or extent > _STEP_MAX_EXTENT:

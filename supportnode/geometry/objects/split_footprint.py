@@ -8,6 +8,8 @@ parts (P,) int64, 0 = the largest.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -26,6 +28,9 @@ from supportnode.kernels.footprint import close3, fill_holes, footprint_raster, 
 _SPLIT_MIN_FRACTION = 0.15
 # A neck this much shallower than both parts it joins is cut (see _split_footprint).
 _SPLIT_NECK_RATIO = 0.6
+# Points whose cells fill a footprint's notches, (Q, 2) metres, or a function giving them
+# (called only when the footprint has a neck), or None.
+Fill = np.ndarray | Callable[[], np.ndarray] | None
 # Holes up to this area (m^2) are filled before the neck split (a side-scanned barrel is a
 # ring); the room that a cluster of walls encloses is not a hole in one object's footprint.
 _SPLIT_MAX_HOLE = 1.0
@@ -49,11 +54,11 @@ def _split_recursive(
     radius: float,
     min_points: int,
     depth: int,
-    fill: np.ndarray | None = None,
+    fill: Fill = None,
 ) -> np.ndarray:
     """(P,) part index per point of xy (P, 2): a row of three barrels splits twice. fill:
-    (Q, 2) points, metres, whose cells count as footprint where they fall within xy's box
-    (what stands on the cluster), or None."""
+    (Q, 2) points, metres, whose cells fill the notches of the footprint within xy's box
+    (what stands on the cluster, what it hides), or a function giving them (see Fill)."""
     parts = _split_footprint(xy, cell, radius, min_points, fill) if depth > 0 else None
     if parts is None:
         return np.zeros(len(xy), dtype=np.int64)
@@ -68,7 +73,7 @@ def _split_recursive(
 
 
 def _split_footprint(
-    xy: np.ndarray, cell: float, radius: float, min_points: int, fill: np.ndarray | None = None
+    xy: np.ndarray, cell: float, radius: float, min_points: int, fill: Fill = None
 ) -> np.ndarray | None:
     """Part index per point (P,) when the footprint of xy (P, 2) falls apart, else None.
 
@@ -93,11 +98,14 @@ def _split_footprint(
     uy = (xy[:, 1] - lo[1]) / cell
     occ = _footprint_raster(ux, uy, shape, cell)
     cut = split_raster(occ, ux, uy, cell, radius, min_points)
-    if cut is None or fill is None or len(fill) == 0:
+    if cut is None or fill is None:
+        return cut
+    fill_xy = fill() if callable(fill) else fill  # found only for a cluster with a neck
+    if len(fill_xy) == 0:
         return cut
     # A neck that closes once what stands on the cluster is filled in is none (a box on a
     # book); the fill only vetoes a cut (a thicker footprint can hold parts of its own).
-    filled = _fill_notches(occ, fill, lo, shape, cell)
+    filled = _fill_notches(occ, fill_xy, lo, shape, cell)
     return None if split_raster(filled, ux, uy, cell, radius, min_points) is None else cut
 
 

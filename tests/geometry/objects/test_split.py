@@ -37,3 +37,36 @@ def test_a_notch_is_a_neck_when_nothing_stands_in_it():
 
 def test_what_stands_on_a_cluster_fills_its_notch():
     assert _parts_of_book(True) == 1
+
+
+def _seen(points, origin, lo, hi):
+    """The points whose segment to the origin misses the box [lo, hi] (a slab test)."""
+    d = origin - points
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (lo - points) / d, (hi - points) / d
+    near = np.nanmax(np.minimum(t0, t1), axis=1)
+    far = np.nanmin(np.maximum(t0, t1), axis=1)
+    return ~((near <= far) & (far > 0) & (near < 1))
+
+
+def _parts_of_shadowed_book(origin):
+    """A block in front of a book (24 x 30 cm) hides a band across most of the book's top
+    from the sensor at (-0.6, 0.15, 0.6): the top seen is two lobes joined by a 4 cm strip at
+    its far end. Label 0: the book; 1: the block's front face."""
+    sensor = np.array([-0.6, 0.15, 0.6])
+    lo, hi = np.array([-0.06, 0.1, -0.035]), np.array([-0.02, 0.2, 0.165])
+    x, y = np.meshgrid(np.arange(0.0, 0.24, 0.004), np.arange(0.0, 0.3, 0.004))
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    top = top[_seen(top, sensor, lo, hi)]
+    yy, zz = np.meshgrid(np.arange(0.1, 0.2, 0.004), np.arange(-0.03, 0.165, 0.004))
+    front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
+    pts = np.concatenate([top, front])
+    lab = np.r_[np.zeros(len(top)), np.ones(len(front))].astype(np.int64)
+    stats = {"merged_splits": 0, "split_parts": 0, "step_splits": 0, "concave_splits": 0}
+    out = _split_touching(pts, lab, ObjectParams(), stats, origin=origin)
+    return len(np.unique(out[lab == 0]))
+
+
+def test_a_shadow_across_a_flat_top_is_no_neck():
+    assert _parts_of_shadowed_book(None) == 2  # the sensor unknown: a neck
+    assert _parts_of_shadowed_book(np.array([-0.6, 0.15, 0.6])) == 1
