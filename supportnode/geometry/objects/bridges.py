@@ -104,7 +104,7 @@ def split_necks(
         while todo:  # three lids in a row part at one neck, then at the other
             sub = todo.pop()
             cut = _neck_parts(cells, above, sub, top, origin)
-            if cut is None or np.bincount(cut).min() < _NECK_MIN_SHARE * len(rows):
+            if cut is None or cut.max() < 1 or np.bincount(cut).min() < _NECK_MIN_SHARE * len(rows):
                 continue  # a corner behind what stands on the face is no lid of its own
             todo.extend(sub[cut == k] for k in range(int(cut.max()) + 1))
             for k in range(1, int(cut.max()) + 1):
