@@ -94,10 +94,12 @@ def split_necks(
     big = np.bincount(group, weights=count * level, minlength=n) >= 2 * _NECK_MIN_CELLS
     part = whole.copy()
     fresh = n
+    merged = face.copy()
     for g in np.flatnonzero(big).tolist():  # a few level groups per scan
         rows = np.flatnonzero(whole == g)
         if cell_above is not None and np.median(cell_above[rows]) < _NECK_MIN_HEIGHT:
             continue  # a flat thing (a sheet, a mat): no sides to tell its pieces by
+        before = fresh
         top = float(np.median(centroid[rows, 2]))
         above = centroid[:, 2] > top + _ABOVE_CELLS * size
         todo = [rows]
@@ -110,10 +112,15 @@ def split_necks(
             for k in range(1, int(cut.max()) + 1):
                 part[sub[cut == k]] = fresh
                 fresh += 1
-    if fresh == n:
+        if fresh == before:
+            # No neck, once what stands on it and what the sensor cannot see are filled in:
+            # one top, however few links join its faces (a bottle's shadow across a book
+            # leaves a lobe of its top joined to the rest by a link or two).
+            merged[rows] = face[rows].min()
+    if fresh == n and np.array_equal(merged, face):
         return face, np.zeros(len(src), bool)
     # A face on both sides of a neck becomes one face per side.
-    key = np.where(on, face.astype(np.int64) * (fresh + 1) + part, -1)
+    key = np.where(on, merged.astype(np.int64) * (fresh + 1) + part, -1)
     _, relabel = np.unique(key[on], return_inverse=True)
     out = np.full(len(face), -1, np.int64)
     out[on] = relabel.reshape(-1)

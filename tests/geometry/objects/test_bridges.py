@@ -140,3 +140,27 @@ def test_a_shadow_across_a_top_is_no_neck():
     front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
     assert len(np.unique(_necks(top, front)[0])) == 2  # the sensor unknown: a neck
     assert len(np.unique(_necks(top, front, origin=origin)[0])) == 1
+
+
+def test_level_faces_of_one_top_without_a_neck_become_one_face():
+    # A block in front of a book (24 x 30 cm) hides a band across most of its top: what is
+    # seen is two lobes joined by a strip at the far end, here two faces, one per side. At
+    # one height, with no neck once the hidden band is filled, they are one top.
+    from supportnode.geometry.objects.faces import make_cells
+
+    origin = np.array([-0.6, 0.15, 0.6])
+    lo, hi = np.array([-0.06, 0.1, -0.035]), np.array([-0.02, 0.2, 0.165])
+    x, y = np.meshgrid(np.arange(0.0, 0.24, 0.002), np.arange(0.0, 0.3, 0.002))
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    top = top[_seen(top, origin, lo, hi)]
+    yy, zz = np.meshgrid(np.arange(0.1, 0.2, 0.002), np.arange(0.0, 0.165, 0.002))
+    front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
+    cells = make_cells(np.concatenate([top, front]), 0.0075, 3)
+    face = np.full(len(cells.centroid), -1, np.int64)
+    of_top = cells.of_point[: len(top)]
+    face[of_top] = (top[:, 1] > 0.15).astype(np.int64)  # two faces, one per side
+    src, dst = cells.grid.adjacent_pairs()
+    out, _ = split_necks(cells, face, np.array([1.0, 1.0]), src, dst, origin)
+    assert len(np.unique(out[of_top])) == 1
+    out, _ = split_necks(cells, face, np.array([1.0, 1.0]), src, dst, None)
+    assert len(np.unique(out[of_top])) >= 2  # the sensor unknown: a neck between them
