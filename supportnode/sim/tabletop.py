@@ -188,6 +188,7 @@ CASES: dict[str, tuple[Callable[[], Scene], float, float]] = {
     "two_cans_touching": (lambda: two_cans(0.0), 1.0, 0.0),
     "two_cans_touching_oblique": (lambda: two_cans(0.0), 1.0, -45.0),
     "three_cans_in_a_row": (three_cans, 1.0, 0.0),
+    "three_cans_oblique": (three_cans, 1.0, 30.0),
     "bottle_before_book": (bottle_before_book, 1.0, 0.0),
     "flat_book": (flat_book, 1.0, 0.0),
     "boxes_at_0.5m": (spread_boxes, 0.5, 0.0),

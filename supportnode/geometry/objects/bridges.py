@@ -21,13 +21,15 @@ Pure: numpy in, labels out.
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import ConvexHull
 
 from supportnode.geometry.objects.faces import Cells
 from supportnode.geometry.objects.split_footprint import split_raster
 from supportnode.kernels.components import label_edges
-from supportnode.kernels.footprint import fill_holes
+from supportnode.kernels.footprint import fill_holes, label8
 
 # A boundary is a crease when it has at least this many links and this share of them concave.
 _CREASE_LINKS = 10
@@ -57,6 +59,11 @@ _HIDDEN_CHUNK = 16_384  # plane cells per pass
 # Level groups lower than this above their surface (metres) are not parted: the tops that
 # can hold something, as in stacks.py.
 _NECK_MIN_HEIGHT = 0.02
+# With two bays in its outline at least this share of its deepest cell deep (two discs
+# touching: about their radius), a footprint's neck is cut up to this share of its parts'
+# depth.
+_BAY_SHARE = 0.4
+_DEFECT_RATIO = 0.9
 # Cells this many cells above a level group's height stand on it (their footprint fills its own).
 _ABOVE_CELLS = 1.5
 
@@ -147,7 +154,17 @@ def _neck_parts(
     occ[over[on_top, 0] + 1, over[on_top, 1] + 1] = True
     u = ij + 0.5  # cell centres, the cell as the raster's unit
     args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _NECK_RATIO, _NECK_DEEPEST)
-    cut = split_raster(fill_holes(occ), u[:, 0], u[:, 1], 1.0, *args)
+    filled = fill_holes(occ)
+    cut = split_raster(filled, u[:, 0], u[:, 1], 1.0, *args)
+    if cut is None and _DEFECT_RATIO > _NECK_RATIO:
+        # The cusps between small discs fill on the lattice, so their necks are nearly as
+        # deep as the discs; the outline still shows them as deep bays in its convex hull,
+        # on both sides of each neck (a box's top has none; an occluded one, one notch):
+        # with two, a shallower neck is enough.
+        bays, deepest = _bays(filled)
+        if (bays >= _BAY_SHARE * deepest).sum() >= 2:
+            args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _DEFECT_RATIO, _NECK_DEEPEST + 1.0)
+            cut = split_raster(filled, u[:, 0], u[:, 1], 1.0, *args)
     if cut is None or origin is None or not origin[2] > top:
         return cut
     # So does what a taller thing in front hides from the sensor (a bottle's shadow on a
@@ -156,6 +173,25 @@ def _neck_parts(
     if not hidden.any():
         return cut
     return split_raster(fill_holes(occ | hidden), u[:, 0], u[:, 1], 1.0, *args)
+
+
+def _bays(occ: np.ndarray) -> tuple[np.ndarray, float]:
+    """(depths (B,), deepest cell), in cells, of the footprint occ (H, W) bool: how deep each
+    bay (a connected set of empty cells inside its convex hull) reaches in from the hull's
+    edge, and how far its own cells lie from the footprint's edge."""
+    cells = np.argwhere(occ).astype(float)
+    if len(cells) < 4 or np.linalg.matrix_rank(cells - cells[0]) < 2:
+        return np.zeros(0), 0.0
+    eq = ConvexHull(cells).equations  # n . x + d <= 0 inside
+    empty = np.argwhere(~occ)
+    to_edge = -(empty.astype(float) @ eq[:, :2].T + eq[:, 2])
+    inside = (to_edge >= -1e-9).all(axis=1)
+    bay_cells = np.zeros(occ.shape, bool)
+    bay_cells[empty[inside, 0], empty[inside, 1]] = True
+    label, n = label8(bay_cells)
+    depth = np.zeros(n)
+    np.maximum.at(depth, label[bay_cells] - 1, to_edge[inside].min(axis=1))
+    return depth, float(ndimage.distance_transform_edt(occ).max())
 
 
 def _hidden(

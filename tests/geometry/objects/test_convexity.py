@@ -101,6 +101,7 @@ TABLETOPS = {
     "two_cans_touching": 0.9,  # their lids touch too: one level face, parted (bridges.py)
     "two_cans_touching_oblique": 0.9,  # one hides their crease: parted at the lids' neck
     "three_cans_in_a_row": 0.85,  # one lid face over three: parted at both necks, no chain
+    "three_cans_oblique": 0.85,  # necks as deep as the lids, but two bays in their outline
     "bottle_before_book": 0.9,  # its shadow cuts a lobe off the book's top: still one top
     "flat_book": 0.9,  # 3.5 cm tall: an object, not part of the table
     "boxes_at_0.5m": 0.9,
