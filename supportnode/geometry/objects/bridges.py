@@ -62,7 +62,7 @@ _NECK_MIN_HEIGHT = 0.02
 # With two bays in its outline at least this share of its deepest cell deep (two discs
 # touching: about their radius), a footprint's neck is cut up to this share of its parts'
 # depth.
-_BAY_SHARE = 0.4
+_BAY_SHARE = 0.35
 _DEFECT_RATIO = 0.9
 # Cells this many cells above a level group's height stand on it (their footprint fills its own).
 _ABOVE_CELLS = 1.5
@@ -191,7 +191,7 @@ def _bays(occ: np.ndarray) -> tuple[np.ndarray, float]:
     label, n = label8(bay_cells)
     depth = np.zeros(n)
     np.maximum.at(depth, label[bay_cells] - 1, to_edge[inside].min(axis=1))
-    return depth, float(ndimage.distance_transform_edt(occ).max())
+    return depth, float(ndimage.distance_transform_edt(occ).max()) - 0.5  # as split_raster
 
 
 def _hidden(
