@@ -85,6 +85,14 @@ def box_on_box() -> Scene:
     )
 
 
+def offset_boxes() -> Scene:
+    """Two boxes of one height side by side, touching, one 4 cm further back: their tops are
+    one level face whose outline steps at the contact."""
+    return _on_table(
+        _box("box_a", (0.12, 0.1, 0.1), 0.0, -0.05), _box("box_b", (0.12, 0.1, 0.1), 0.04, 0.05)
+    )
+
+
 def can_against_box() -> Scene:
     """A can touching the side of a box."""
     return _on_table(_box("box", (0.14, 0.2, 0.16), 0.0, 0.0), _can("can", -0.103, 0.02))
@@ -180,6 +188,7 @@ CASES: dict[str, tuple[Callable[[], Scene], float, float]] = {
     "boxes_1cm_apart": (lambda: touching_boxes(0.01), 1.0, -30.0),
     "boxes_3cm_apart": (lambda: touching_boxes(0.03), 1.0, -30.0),
     "box_on_box": (box_on_box, 1.0, 20.0),
+    "offset_boxes": (offset_boxes, 1.0, 0.0),
     "can_against_box": (can_against_box, 1.0, 30.0),
     "mug": (mug, 1.0, -20.0),
     "bowl": (bowl, 1.0, 0.0),

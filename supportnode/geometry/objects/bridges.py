@@ -163,7 +163,7 @@ def _neck_parts(
         # with two, a shallower neck is enough.
         bays, deepest = _bays(filled)
         if (bays >= _BAY_SHARE * deepest).sum() >= 2:
-            args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _DEFECT_RATIO, _NECK_DEEPEST + 1.0)
+            args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _DEFECT_RATIO, np.inf)
             cut = split_raster(filled, u[:, 0], u[:, 1], 1.0, *args)
     if cut is None or origin is None or not origin[2] > top:
         return cut

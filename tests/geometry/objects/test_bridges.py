@@ -164,3 +164,18 @@ def test_level_faces_of_one_top_without_a_neck_become_one_face():
     assert len(np.unique(out[of_top])) == 1
     out, _ = split_necks(cells, face, np.array([1.0, 1.0]), src, dst, None)
     assert len(np.unique(out[of_top])) >= 2  # the sensor unknown: a neck between them
+
+
+def test_an_l_shaped_top_has_one_bay_and_stays_whole():
+    # An L (one bay in its outline) and two boxes of one height side by side, one set back
+    # (a step in the outline on both sides): the first is one top, the second two.
+    g = np.arange(0.0, 0.2, 0.002)
+    x, y = np.meshgrid(g, g)
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    ell = top[(top[:, 0] < 0.08) | (top[:, 1] < 0.08)]
+    assert len(np.unique(_necks(ell)[0])) == 1
+    a = top[(top[:, 0] < 0.12) & (top[:, 1] < 0.1)]
+    b = top[(top[:, 0] < 0.12) & (top[:, 1] < 0.1)] + [0.04, 0.1, 0.0]
+    part, _ = _necks(np.concatenate([a, b]))
+    assert len(np.unique(part)) == 2
+    assert part[0] != part[-1]

@@ -93,6 +93,7 @@ TABLETOPS = {
     "boxes_1cm_apart": 0.9,
     "boxes_3cm_apart": 0.9,
     "box_on_box": 0.9,  # two objects, the upper one supported by the lower
+    "offset_boxes": 0.9,  # one height, one top face: parted where its outline steps
     "can_against_box": 0.9,
     "mug": 0.9,  # with its handle: one object
     "bowl": 0.8,  # its inside curves gently: one object
