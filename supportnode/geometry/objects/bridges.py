@@ -40,6 +40,8 @@ _BRIDGE_LINKS = 5
 # and flat: its cells' heights spread by at most this many cells (standard deviation).
 _LEVEL_COS = float(np.cos(np.radians(15.0)))
 _FLAT_CELLS = 0.5
+# ... or this many noise sigmas, if more (a Kinect's top seen obliquely spreads by its noise).
+_FLAT_SIGMAS = 2.0
 # Necks of level faces: parts of at least this many cells, a neck shallower than this many
 # cells always cut (the footprint split's radius; relative necks as there).
 _NECK_MIN_CELLS = 6
@@ -76,13 +78,15 @@ def split_necks(
     dst: np.ndarray,
     origin: np.ndarray | None,
     cell_above: np.ndarray | None = None,
+    sigma: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(face (F,), cut (L,)): level faces parted at the necks of their footprints, and which
     links cross such a neck. Adjacent level faces at one height (within a cell) are taken
     together: two lids touching are often two faces, joined only by their flat boundary.
     face: (F,) cell labels, -1 none; up: (n_faces,) |z| of each face's unit normal; src,
     dst: (L,) adjacent cells; origin: (3,) the sensor, metres (None: unknown); cell_above:
-    (F,) each cell's height above its surface, metres (None: unknown)."""
+    (F,) each cell's height above its surface, metres (None: unknown); sigma: the depth
+    noise, metres."""
     centroid, size = cells.centroid, cells.size
     n = len(up)
     on = face >= 0
@@ -90,7 +94,9 @@ def split_necks(
     height = np.bincount(face[on], weights=centroid[on, 2], minlength=n) / count
     spread = np.bincount(face[on], weights=centroid[on, 2] ** 2, minlength=n) / count
     # Level and flat: a bowl's inside fits a level plane too, but curves through centimetres.
-    flat = np.sqrt(np.maximum(spread - height**2, 0.0)) <= _FLAT_CELLS * size
+    flat = np.sqrt(np.maximum(spread - height**2, 0.0)) <= max(
+        _FLAT_CELLS * size, _FLAT_SIGMAS * sigma
+    )
     level = (up >= _LEVEL_COS) & flat
     fa, fb = face[src], face[dst]
     both = (fa >= 0) & (fb >= 0) & (fa != fb)

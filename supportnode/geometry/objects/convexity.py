@@ -100,7 +100,7 @@ def convex_segments(
         count = cells.moments[:, 0]
         cell_above = None if above is None else np.bincount(cells.of_point, above) / count
         seg, face = _join_faces(
-            cells, face, (src, dst), normal_cells, (origin, inside), smooth_deg, cell_above
+            cells, face, (src, dst), normal_cells, (origin, inside), smooth_deg, cell_above, sigma
         )
         if cell_above is not None:
             up = np.abs(_face_normals(cells, face)[:, 2])
@@ -143,17 +143,18 @@ def _join_faces(
     sensor: tuple[np.ndarray | None, np.ndarray | None],
     smooth_deg: float,
     cell_above: np.ndarray | None,
+    sigma: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(F,) segment of each cell (-1: none): faces joined across their convex boundaries,
     judged with each cell's normal taken from its own face's cells (both sides of a crease
     keep their face's normal, not the blend of the two); and (F,) the faces, necks and
     bridges parted (:mod:`bridges`). adjacent: (src, dst) adjacent cells; sensor: (origin,
     inside) as `orient` takes them; cell_above: (F,) each cell's height above its surface,
-    metres, or None."""
+    metres, or None; sigma: the depth noise, metres."""
     src, dst = adjacent
     origin, inside = sensor
     up = np.abs(_face_normals(cells, face)[:, 2])
-    face, neck = split_necks(cells, face, up, src, dst, origin, cell_above)
+    face, neck = split_necks(cells, face, up, src, dst, origin, cell_above, sigma)
     fa, fb = face[src], face[dst]
     on = (fa >= 0) & (fb >= 0) & (fa != fb)
     s, t = src[on], dst[on]
