@@ -123,7 +123,7 @@ def _labels(pts: np.ndarray, params: ObjectParams, eye) -> np.ndarray:
 # of one height touch, and where a neck rule could part one object wrongly.
 HAZARDS = [
     ("two cans touching", lambda: tabletop.two_cans(0.0), (0.0, 30.0, -45.0)),
-    ("three cans in a row", tabletop.three_cans, (-30.0, 0.0, 30.0, 60.0)),
+    ("three cans in a row", tabletop.three_cans, (-60.0, -30.0, 0.0, 30.0, 60.0)),
     ("two boxes, one set back", tabletop.offset_boxes, (-60.0, -30.0, 0.0, 30.0, 60.0)),
     ("bottle 2 cm before a book", tabletop.bottle_before_book, (-20.0, 0.0, 20.0)),
     ("box on a book's edge", tabletop.box_on_book, (-60.0, -30.0, 0.0, 30.0, 60.0, 90.0)),
