@@ -65,7 +65,7 @@ _NECK_MIN_HEIGHT = 0.02
 # touching: about their radius), a footprint's neck is cut up to this share of its parts'
 # depth.
 _BAY_SHARE = 0.35
-_DEFECT_RATIO = 0.9
+_BAY_NECK_RATIO = 0.9
 # Cells this many cells above a level group's height stand on it (their footprint fills its own).
 _ABOVE_CELLS = 1.5
 
@@ -162,14 +162,14 @@ def _neck_parts(
     args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _NECK_RATIO, _NECK_DEEPEST)
     filled = fill_holes(occ)
     cut = split_raster(filled, u[:, 0], u[:, 1], 1.0, *args)
-    if cut is None and _DEFECT_RATIO > _NECK_RATIO:
+    if cut is None:
         # The cusps between small discs fill on the lattice, so their necks are nearly as
         # deep as the discs; the outline still shows them as deep bays in its convex hull,
         # on both sides of each neck (a box's top has none; an occluded one, one notch):
         # with two, a shallower neck is enough.
         bays, deepest = _bays(filled)
         if (bays >= _BAY_SHARE * deepest).sum() >= 2:
-            args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _DEFECT_RATIO, np.inf)
+            args = (_NECK_RADIUS_CELLS, _NECK_MIN_CELLS, _BAY_NECK_RATIO, np.inf)
             cut = split_raster(filled, u[:, 0], u[:, 1], 1.0, *args)
     if cut is None or origin is None or not origin[2] > top:
         return cut

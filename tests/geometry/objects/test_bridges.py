@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from shadows import seen
 
 from supportnode.geometry.objects.bridges import split_bridges, split_necks
 
@@ -116,16 +117,6 @@ def test_a_notch_under_what_stands_on_the_face_is_no_neck():
     assert len(np.unique(part)) == 1
 
 
-def _seen(points, origin, lo, hi):
-    """The points whose segment to the origin misses the box [lo, hi] (a slab test)."""
-    d = origin - points
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t0, t1 = (lo - points) / d, (hi - points) / d
-    near = np.nanmax(np.minimum(t0, t1), axis=1)
-    far = np.nanmin(np.maximum(t0, t1), axis=1)
-    return ~((near <= far) & (far > 0) & (near < 1))
-
-
 def test_a_shadow_across_a_top_is_no_neck():
     # A tall block in front of a book hides a band across most of the book's top from the
     # sensor: what the sensor sees of the top is two lobes joined by a strip.
@@ -134,7 +125,7 @@ def test_a_shadow_across_a_top_is_no_neck():
     g = np.arange(0.0, 0.24, 0.002)
     x, y = np.meshgrid(g, g[:85])
     top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
-    top = top[_seen(top, origin, lo, hi)]
+    top = top[seen(top, origin, lo, hi)]
     f = np.arange(0.03, 0.14, 0.002)
     yy, zz = np.meshgrid(f, np.arange(0.0, 0.3, 0.002))
     front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
@@ -152,7 +143,7 @@ def test_level_faces_of_one_top_without_a_neck_become_one_face():
     lo, hi = np.array([-0.06, 0.1, -0.035]), np.array([-0.02, 0.2, 0.165])
     x, y = np.meshgrid(np.arange(0.0, 0.24, 0.002), np.arange(0.0, 0.3, 0.002))
     top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
-    top = top[_seen(top, origin, lo, hi)]
+    top = top[seen(top, origin, lo, hi)]
     yy, zz = np.meshgrid(np.arange(0.1, 0.2, 0.002), np.arange(0.0, 0.165, 0.002))
     front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
     cells = make_cells(np.concatenate([top, front]), 0.0075, 3)

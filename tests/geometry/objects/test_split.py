@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from shadows import seen
 
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.params import ObjectParams
@@ -39,16 +40,6 @@ def test_what_stands_on_a_cluster_fills_its_notch():
     assert _parts_of_book(True) == 1
 
 
-def _seen(points, origin, lo, hi):
-    """The points whose segment to the origin misses the box [lo, hi] (a slab test)."""
-    d = origin - points
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t0, t1 = (lo - points) / d, (hi - points) / d
-    near = np.nanmax(np.minimum(t0, t1), axis=1)
-    far = np.nanmin(np.maximum(t0, t1), axis=1)
-    return ~((near <= far) & (far > 0) & (near < 1))
-
-
 def _parts_of_shadowed_book(origin):
     """A block in front of a book (24 x 30 cm) hides a band across most of the book's top
     from the sensor at (-0.6, 0.15, 0.6): the top seen is two lobes joined by a 4 cm strip at
@@ -57,7 +48,7 @@ def _parts_of_shadowed_book(origin):
     lo, hi = np.array([-0.06, 0.1, -0.035]), np.array([-0.02, 0.2, 0.165])
     x, y = np.meshgrid(np.arange(0.0, 0.24, 0.004), np.arange(0.0, 0.3, 0.004))
     top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
-    top = top[_seen(top, sensor, lo, hi)]
+    top = top[seen(top, sensor, lo, hi)]
     yy, zz = np.meshgrid(np.arange(0.1, 0.2, 0.004), np.arange(-0.03, 0.165, 0.004))
     front = np.column_stack([np.full(yy.size, -0.06), yy.ravel(), zz.ravel()])
     pts = np.concatenate([top, front])
