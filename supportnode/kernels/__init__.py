@@ -1,4 +1,4 @@
-"""Compiled loops: numba ``@njit(cache=True)`` kernels, numpy arrays in, numpy arrays out.
+"""Compiled loops: numba ``@njit(cache=True, nogil=True)`` kernels, arrays in, arrays out.
 
 Floor 0 of the package: nothing here imports from the rest of supportnode, and nothing above
 sees a numba type. Each module holds the kernels of one job (voxel store, region growing,
@@ -6,8 +6,10 @@ connected components, ray clearing, rasters, LZF) behind plain typed Python func
 check their inputs (shape, dtype, finite values) before the compiled code runs.
 
 Conventions:
-- ``@njit(cache=True)`` always, so the compile cost is paid once per machine (numba writes the
-  cache beside the source, or under ``NUMBA_CACHE_DIR`` / the user cache when that is read-only).
+- ``@njit(cache=True, nogil=True)`` always: the compile cost is paid once per machine (numba
+  writes the cache beside the source, or under ``NUMBA_CACHE_DIR`` / the user cache when that
+  is read-only), and the node's other thread runs Python while a kernel runs (the receiving
+  side merges the next scan while the detecting side labels this one).
 - A module that adds kernels registers a small warm-up with :func:`runtime.warmer`; the node
   calls :func:`runtime.warm` before it subscribes, then rehearses one detection
   (`supportnode.node.rehearsal`), so its first scan is not slow.

@@ -14,7 +14,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _column_sums(
     starts: np.ndarray,
     counts: np.ndarray,
@@ -96,7 +96,7 @@ def column_sums(
     return _column_sums(*_grid_args(starts, counts, local, size, labels, use, per), val)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _in_columns(
     starts: np.ndarray,
     counts: np.ndarray,
@@ -141,7 +141,7 @@ def points_in_columns(
     return _in_columns(*args, np.asarray(flagged, np.bool_))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _band_rows(
     pts: np.ndarray,
     labels: np.ndarray,

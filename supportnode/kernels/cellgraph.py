@@ -33,12 +33,12 @@ FORWARD_26 = np.array(
 )
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _home(key: int, shift: int) -> int:
     return int64((uint64(key) * uint64(GOLDEN)) >> uint64(shift))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _build(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     bits = 4
     while (1 << bits) < 2 * keys.size:
@@ -57,7 +57,7 @@ def _build(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     return tk, tv, shift
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _find(tk: np.ndarray, tv: np.ndarray, shift: int, key: int) -> int:
     mask = tk.size - 1
     pos = _home(key, shift)
@@ -70,7 +70,7 @@ def _find(tk: np.ndarray, tv: np.ndarray, shift: int, key: int) -> int:
         pos = (pos + 1) & mask
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _window_sums(
     ijk: np.ndarray,
     dims: np.ndarray,
@@ -98,7 +98,7 @@ def _window_sums(
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairs(
     ijk: np.ndarray, dims: np.ndarray, tk: np.ndarray, tv: np.ndarray, shift: int, off: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -119,7 +119,7 @@ def _pairs(
     return src[:e], dst[:e]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _extent(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -134,7 +134,7 @@ def _extent(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     return lo, hi, finite
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bin_points(
     pts: np.ndarray, base: np.ndarray, size: float, pad: int, dims: np.ndarray, bits: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

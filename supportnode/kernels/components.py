@@ -9,7 +9,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _find(parent: np.ndarray, i: int) -> int:
     root = i
     while parent[root] != root:
@@ -19,7 +19,7 @@ def _find(parent: np.ndarray, i: int) -> int:
     return root
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     parent = np.arange(n)
     for e in range(src.size):
@@ -35,7 +35,7 @@ def _label(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return _numbered(parent)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _numbered(parent: np.ndarray) -> np.ndarray:
     # Components numbered by their smallest member, which is each root (see _label).
     n = parent.size
@@ -69,7 +69,7 @@ def label_edges(n: int, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return _label(int(n), s, d)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label_grid(
     vkeys: np.ndarray,
     occupied: np.ndarray,

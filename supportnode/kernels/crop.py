@@ -14,7 +14,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _crop(pts: np.ndarray, lo: np.ndarray, hi: np.ndarray, limit: int) -> np.ndarray:
     out = np.empty(min(pts.shape[0], limit), np.int64)
     m = 0

@@ -11,13 +11,13 @@ from supportnode.kernels.runtime import warmer
 _MAX_INDEX = 2.0**52
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hash(i: int, j: int, k: int, mask: int) -> int:
     h = (i * 73856093) ^ (j * 19349663) ^ (k * 83492791)
     return h & mask
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rehash(keys: np.ndarray, used: int, size: int) -> np.ndarray:
     slot = np.full(size, -1, np.int64)
     mask = size - 1
@@ -29,7 +29,7 @@ def _rehash(keys: np.ndarray, used: int, size: int) -> np.ndarray:
     return slot
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _grow(a: np.ndarray) -> np.ndarray:
     out = np.zeros((2 * a.shape[0], a.shape[1]), a.dtype)
     # Element by element: a 2-D slice assignment costs ~3 s of compiling on a fresh install.
@@ -39,7 +39,7 @@ def _grow(a: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sums(points: np.ndarray, inv: float) -> np.ndarray:
     # Tables sized by the voxels found, not the points: a depth image of 300k pixels fills a
     # few thousand voxels of 5 cm, and page-faulting point-sized tables cost more than the pass.

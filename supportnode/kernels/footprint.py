@@ -17,7 +17,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _close3(mask: np.ndarray) -> np.ndarray:
     # Dilation by the 3 x 3 square, separably (rows then columns), then erosion: a cell stays
     # when its whole 3 x 3 window is dilated, with the outside of the raster empty.
@@ -49,7 +49,7 @@ def _close3(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _find(parent: np.ndarray, a: int) -> int:
     while parent[a] != a:
         parent[a] = parent[parent[a]]
@@ -57,7 +57,7 @@ def _find(parent: np.ndarray, a: int) -> int:
     return a
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _background_runs(mask: np.ndarray, value: bool) -> tuple[np.ndarray, np.ndarray, int]:
     # Runs of cells equal to value (False: the background) along each row, (row, first
     # column, end column) and the index of each row's first run; a union-find over runs labels
@@ -83,7 +83,7 @@ def _background_runs(mask: np.ndarray, value: bool) -> tuple[np.ndarray, np.ndar
     return runs, first, n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _joined(runs: np.ndarray, first: np.ndarray, h: int, diagonal: int) -> np.ndarray:
     # Union-find parents of the runs (see _background_runs), each run joined to those of the
     # row above that share a column (diagonal 1: or meet it at a corner, 8-connectivity);
@@ -103,7 +103,7 @@ def _joined(runs: np.ndarray, first: np.ndarray, h: int, diagonal: int) -> np.nd
     return parent
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_holes(mask: np.ndarray, max_cells: int) -> np.ndarray:
     h, w = mask.shape
     out = mask.copy()
@@ -125,7 +125,7 @@ def _fill_holes(mask: np.ndarray, max_cells: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label8(mask: np.ndarray) -> tuple[np.ndarray, int]:
     # Foreground runs along rows, joined to the runs of the row above that touch them
     # (sharing or diagonally meeting a column); components numbered by their first run, which
@@ -148,7 +148,7 @@ def _label8(mask: np.ndarray) -> tuple[np.ndarray, int]:
     return out, count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rasterise(ux: np.ndarray, uy: np.ndarray, h: int, w: int) -> np.ndarray:
     occ = np.zeros((h, w), np.bool_)
     for r in range(ux.shape[0]):

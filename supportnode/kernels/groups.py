@@ -16,7 +16,7 @@ from supportnode.kernels.runtime import warmer
 __all__ = ["label_boxes", "rows_at_ranks"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rows_at_ranks(labels: np.ndarray, ranks: np.ndarray, starts: np.ndarray) -> np.ndarray:
     n = len(starts) - 1
     out = np.full(len(ranks), -1, np.int64)
@@ -47,7 +47,7 @@ def rows_at_ranks(labels: np.ndarray, ranks: np.ndarray, starts: np.ndarray) -> 
     return _rows_at_ranks(lab, rk, st)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label_boxes(points: np.ndarray, labels: np.ndarray, n: int) -> tuple:
     d = points.shape[1]
     lo = np.full((n, d), np.inf)

@@ -26,27 +26,14 @@ _SAMPLE_ABOVE = 4096
 _SAMPLE = 1024
 # Relative round-off below which three points are on one line (see _turns_left).
 _COLLINEAR = 1e-12
-# Directions whose extreme points make the filtering octagon, counter-clockwise from -x.
-_DIRS = np.array(
-    [
-        [-1.0, 0.0],
-        [-1.0, -1.0],
-        [0.0, -1.0],
-        [1.0, -1.0],
-        [1.0, 0.0],
-        [1.0, 1.0],
-        [0.0, 1.0],
-        [-1.0, 1.0],
-    ]
-)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cross(ox: float, oy: float, ax: float, ay: float, bx: float, by: float) -> float:
     return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _turns_left(ox: float, oy: float, ax: float, ay: float, bx: float, by: float) -> bool:
     # o -> a -> b turns left by more than round-off: points on one line up to the last bits
     # of their coordinates (decimal data: 0.013, 0.104, 1.105) are collinear, as for Qhull.
@@ -54,39 +41,72 @@ def _turns_left(ox: float, oy: float, ax: float, ay: float, bx: float, by: float
     return ux * vy - uy * vx > _COLLINEAR * (abs(ux) + abs(uy)) * (abs(vx) + abs(vy))
 
 
-@njit(cache=True)
-def _survivors(x: np.ndarray, y: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-    # Indices of the points not strictly inside the octagon of the extreme points along dirs
-    # (taken in counter-clockwise order, so the octagon's vertices are in that order too).
+@njit(cache=True, nogil=True)
+def _extremes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    # The first point extreme along each of eight directions, counter-clockwise from -x (-x,
+    # -x-y, -y, x-y, x, x+y, y, y-x), in one pass with the maxima in registers.
+    e0 = e1 = e2 = e3 = e4 = e5 = e6 = e7 = 0
+    b0 = b1 = b2 = b3 = b4 = b5 = b6 = b7 = -np.inf
+    for i in range(len(x)):
+        xi, yi = x[i], y[i]
+        s, t = xi + yi, xi - yi
+        if -xi > b0:
+            b0, e0 = -xi, i
+        if -s > b1:
+            b1, e1 = -s, i
+        if -yi > b2:
+            b2, e2 = -yi, i
+        if t > b3:
+            b3, e3 = t, i
+        if xi > b4:
+            b4, e4 = xi, i
+        if s > b5:
+            b5, e5 = s, i
+        if yi > b6:
+            b6, e6 = yi, i
+        if -t > b7:
+            b7, e7 = -t, i
+    out = np.empty(8, np.int64)
+    out[0], out[1], out[2], out[3] = e0, e1, e2, e3
+    out[4], out[5], out[6], out[7] = e4, e5, e6, e7
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _survivors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    # Indices of the points not strictly inside the octagon of the extreme points along eight
+    # directions (see _extremes: counter-clockwise, so the octagon's vertices are in that order).
     n = len(x)
-    ex = np.zeros(8, np.int64)
-    best = np.full(8, -np.inf)
-    for i in range(n):  # all eight extremes in one pass
-        for d in range(8):
-            v = dirs[d, 0] * x[i] + dirs[d, 1] * y[i]
-            if v > best[d]:
-                best[d] = v
-                ex[d] = i
+    ex = _extremes(x, y)
+    # The octagon's edges once (a repeated vertex makes none), not per point.
+    edge = np.empty((8, 4))
+    edges = 0
+    for d in range(8):
+        a, b = ex[d], ex[(d + 1) % 8]
+        if x[a] == x[b] and y[a] == y[b]:
+            continue
+        edge[edges, 0], edge[edges, 1] = x[a], y[a]
+        edge[edges, 2], edge[edges, 3] = x[b], y[b]
+        edges += 1
     keep = np.empty(n, np.int64)
     m = 0
+    if edges < 3:
+        for i in range(n):
+            keep[i] = i
+        return keep
     for i in range(n):
         inside = True
-        edges = 0
-        for d in range(8):
-            a, b = ex[d], ex[(d + 1) % 8]
-            if x[a] == x[b] and y[a] == y[b]:
-                continue  # repeated vertex: no edge
-            edges += 1
-            if _cross(x[a], y[a], x[b], y[b], x[i], y[i]) <= 0.0:
+        for d in range(edges):
+            if _cross(edge[d, 0], edge[d, 1], edge[d, 2], edge[d, 3], x[i], y[i]) <= 0.0:
                 inside = False
                 break
-        if not inside or edges < 3:
+        if not inside:
             keep[m] = i
             m += 1
     return keep[:m]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _chain(x: np.ndarray, y: np.ndarray, idx: np.ndarray, ring: np.ndarray) -> int:
     # Andrew's monotone chain over the points idx (sorted by x, then y); writes the ring's
     # point indices into ring (room for 2 * len(idx) + 1), returns its length.
@@ -114,12 +134,12 @@ def _chain(x: np.ndarray, y: np.ndarray, idx: np.ndarray, ring: np.ndarray) -> i
     return max(k, 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _before(x: np.ndarray, y: np.ndarray, i: int, j: int) -> bool:
     return x[i] < x[j] or (x[i] == x[j] and y[i] < y[j])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sort_xy(idx: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     # Bottom-up merge sort of idx by x, then y; returns the sorted copy. Hand-written: numba's
     # generic sorts cost seconds of compiling on a fresh install, this a fraction.
@@ -153,7 +173,7 @@ def _sort_xy(idx: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return src
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sorted_hull(x: np.ndarray, y: np.ndarray, cand: np.ndarray) -> np.ndarray:
     # The ring (point indices) of the points cand, chained in x, then y order.
     order = _sort_xy(cand, x, y)
@@ -161,7 +181,7 @@ def _sorted_hull(x: np.ndarray, y: np.ndarray, cand: np.ndarray) -> np.ndarray:
     return ring[: _chain(x, y, order, ring)]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _last_at_most(xs: np.ndarray, v: float, descending: bool) -> int:
     # The last index whose xs (ascending, or descending) is <= v (> v when descending).
     lo, hi = 0, len(xs) - 1
@@ -174,7 +194,7 @@ def _last_at_most(xs: np.ndarray, v: float, descending: bool) -> int:
     return lo
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _outside(x: np.ndarray, y: np.ndarray, cand: np.ndarray, ring: np.ndarray) -> np.ndarray:
     # The points of cand not strictly inside the convex ring (counter-clockwise from the
     # lowest x, then y; at least 3 vertices): their x between its ends, above its lower chain
@@ -217,8 +237,8 @@ def _outside(x: np.ndarray, y: np.ndarray, cand: np.ndarray, ring: np.ndarray) -
     return keep[:m]
 
 
-@njit(cache=True)
-def _hulls(points: np.ndarray, begin: np.ndarray, end: np.ndarray, dirs: np.ndarray) -> tuple:
+@njit(cache=True, nogil=True)
+def _hulls(points: np.ndarray, begin: np.ndarray, end: np.ndarray) -> tuple:
     n_clusters = len(begin)
     ring_starts = np.zeros(n_clusters + 1, np.int64)
     # A ring has at most as many vertices as its cluster has points.
@@ -237,7 +257,7 @@ def _hulls(points: np.ndarray, begin: np.ndarray, end: np.ndarray, dirs: np.ndar
         for i in range(b - a):
             x[i] = points[a + i, 0]
             y[i] = points[a + i, 1]
-        cand = _survivors(x, y, dirs)
+        cand = _survivors(x, y)
         if len(cand) > _SAMPLE_ABOVE:
             # A ring of walls leaves most of its points outside the octagon: the hull of an
             # even sample of them (a polygon of hull points too) drops most of the rest before
@@ -279,7 +299,7 @@ def footprint_hulls(
         )
     if len(lo) and (lo.min() < 0 or hi.max() > len(pts) or (hi < lo).any()):
         raise ValueError("footprint_hulls: each cluster's rows must lie within the points")
-    return _hulls(pts, lo, hi, _DIRS)
+    return _hulls(pts, lo, hi)
 
 
 @warmer

@@ -25,7 +25,7 @@ _MESSAGES = {
 }
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _decompress(src: np.ndarray, out: np.ndarray) -> int:
     n_in = src.size
     size = out.size

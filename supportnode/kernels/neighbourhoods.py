@@ -13,7 +13,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _covariances(c: np.ndarray, idx: np.ndarray) -> np.ndarray:
     rows, k = idx.shape
     out = np.empty((6, rows))

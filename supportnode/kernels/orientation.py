@@ -8,7 +8,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _support(axes: np.ndarray, normals: np.ndarray, cos_min: float) -> np.ndarray:
     out = np.zeros(axes.shape[0], np.int64)
     for a in range(axes.shape[0]):

@@ -13,7 +13,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _label(
     lx: np.ndarray,
     ly: np.ndarray,

@@ -14,7 +14,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _transform(p: np.ndarray, r: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
     for n in range(p.shape[0]):
         x, y, z = p[n, 0], p[n, 1], p[n, 2]

@@ -13,7 +13,7 @@ from numba import njit
 from supportnode.kernels.runtime import warmer
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _run_moments(
     lx: np.ndarray, ly: np.ndarray, lz: np.ndarray, idx: np.ndarray, run: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -49,7 +49,7 @@ def _run_moments(
     return sums, outer, lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _range_extremes(
     lx: np.ndarray, ly: np.ndarray, lz: np.ndarray, starts: np.ndarray, counts: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
