@@ -71,40 +71,101 @@ def _find(tk: np.ndarray, tv: np.ndarray, shift: int, key: int) -> int:
 
 
 @njit(cache=True, nogil=True)
+def _columns(ijk: np.ndarray, dims: np.ndarray) -> tuple:
+    # The cells grouped by column (i, j): a lookup table of the columns' packed keys, each
+    # column's run [start[col], start[col + 1]) of ``cells``, ascending in k within the run.
+    n = ijk.shape[0]
+    keys = np.empty(n, np.int64)
+    for c in range(n):
+        keys[c] = ijk[c, 0] * dims[1] + ijk[c, 1]
+    bits = 4
+    while (1 << bits) < 2 * max(n, 1):
+        bits += 1
+    cap = 1 << bits
+    shift = 64 - bits
+    mask = cap - 1
+    tk = np.full(cap, -1, np.int64)
+    tv = np.empty(cap, np.int64)
+    col = np.empty(n, np.int64)
+    count = np.zeros(n + 1, np.int64)
+    m = 0
+    for c in range(n):  # a column id per column, in order of its first cell
+        pos = _home(keys[c], shift)
+        while tk[pos] != -1 and tk[pos] != keys[c]:
+            pos = (pos + 1) & mask
+        if tk[pos] == -1:
+            tk[pos] = keys[c]
+            tv[pos] = m
+            m += 1
+        col[c] = tv[pos]
+        count[col[c] + 1] += 1
+    start = np.empty(m + 1, np.int64)
+    start[0] = 0
+    for q in range(m):
+        start[q + 1] = start[q] + count[q + 1]
+    fill = start.copy()
+    cells = np.empty(n, np.int64)
+    for c in range(n):
+        t = fill[col[c]]
+        # Insertion into the column's run by k (columns are short: tens of cells).
+        while t > start[col[c]] and ijk[cells[t - 1], 2] > ijk[c, 2]:
+            cells[t] = cells[t - 1]
+            t -= 1
+        cells[t] = c
+        fill[col[c]] += 1
+    return tk, tv, shift, start, cells
+
+
+@njit(cache=True, nogil=True)
 def _window_sums(
     ijk: np.ndarray,
     dims: np.ndarray,
-    tk: np.ndarray,
-    tv: np.ndarray,
-    shift: int,
     mom: np.ndarray,
     w: int,
     label: np.ndarray,
     same: bool,
     at: np.ndarray,
 ) -> np.ndarray:
+    # Per cell, the (2w + 1)^2 columns around it, each looked up once and its cells within w
+    # in k read in ascending k: the same cells in the same order (dx, dy, dz ascending) as
+    # (2w + 1)^3 lookups of single cells, so the same sums to the bit.
+    tk, tv, shift, start, cells = _columns(ijk, dims)
     m = mom.shape[1]
     out = np.zeros((at.size, m))
     for r in range(at.size):
         c = at[r]
+        k_lo, k_hi = ijk[c, 2] - w, ijk[c, 2] + w
         for dx in range(-w, w + 1):
             for dy in range(-w, w + 1):
-                base = ((ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy) * dims[2] + ijk[c, 2]
-                for dz in range(-w, w + 1):
-                    j = _find(tk, tv, shift, base + dz)
-                    if j >= 0 and (not same or label[j] == label[c]):
-                        for q in range(m):
-                            out[r, q] += mom[j, q]
+                q = _find(tk, tv, shift, (ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy)
+                if q < 0:
+                    continue
+                for t in range(start[q], start[q + 1]):
+                    j = cells[t]
+                    k = ijk[j, 2]
+                    if k > k_hi:
+                        break
+                    if k >= k_lo and (not same or label[j] == label[c]):
+                        for e in range(m):
+                            out[r, e] += mom[j, e]
     return out
 
 
 @njit(cache=True, nogil=True)
 def _pairs(
-    ijk: np.ndarray, dims: np.ndarray, tk: np.ndarray, tv: np.ndarray, shift: int, off: np.ndarray
+    ijk: np.ndarray,
+    dims: np.ndarray,
+    tk: np.ndarray,
+    tv: np.ndarray,
+    shift: int,
+    off: np.ndarray,
+    centroid: np.ndarray,
+    within: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     n = ijk.shape[0]
     src = np.empty(n * off.shape[0], np.int64)
     dst = np.empty(n * off.shape[0], np.int64)
+    check = within < np.inf
     e = 0
     for c in range(n):
         for o in range(off.shape[0]):
@@ -112,10 +173,18 @@ def _pairs(
                 ijk[c, 2] + off[o, 2]
             )
             j = _find(tk, tv, shift, key)
-            if j >= 0:
-                src[e] = c
-                dst[e] = j
-                e += 1
+            if j < 0:
+                continue
+            if check:
+                # As numpy's norm of the difference: squares summed left to right, then sqrt.
+                dx = centroid[c, 0] - centroid[j, 0]
+                dy = centroid[c, 1] - centroid[j, 1]
+                dz = centroid[c, 2] - centroid[j, 2]
+                if not np.sqrt(dx * dx + dy * dy + dz * dz) <= within:
+                    continue
+            src[e] = c
+            dst[e] = j
+            e += 1
     return src[:e], dst[:e]
 
 
@@ -255,14 +324,23 @@ class CellGrid:
         if len(rows) and (rows.min() < 0 or rows.max() >= len(self.ijk)):
             raise ValueError("cells asked for lie outside the grid")
         same = label is not None
-        grid = (self.ijk, self.dims, self._tk, self._tv, self._shift)
-        return _window_sums(*grid, mom, int(w), lab, same, rows)
+        return _window_sums(self.ijk, self.dims, mom, int(w), lab, same, rows)
 
-    def adjacent_pairs(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pairs (src, dst) of 26-adjacent cells, each pair once: two (E,) int64."""
+    def adjacent_pairs(
+        self, centroid: np.ndarray | None = None, within: float = np.inf
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs (src, dst) of 26-adjacent cells, each pair once: two (E,) int64; with
+        ``centroid`` (F, 3) float64, only those whose centroids lie within ``within`` (same
+        unit) of each other."""
         if self.pad < 1:
             raise ValueError("adjacent pairs need a padding of at least one cell")
-        return _pairs(self.ijk, self.dims, self._tk, self._tv, self._shift, FORWARD_26)
+        if centroid is None:
+            centroid, within = np.zeros((len(self.ijk), 3)), np.inf
+        centroid = np.ascontiguousarray(centroid, dtype=np.float64)
+        if centroid.shape != (len(self.ijk), 3):
+            raise ValueError("centroids must be (F, 3), a row per cell")
+        grid = (self.ijk, self.dims, self._tk, self._tv, self._shift)
+        return _pairs(*grid, FORWARD_26, centroid, float(within))
 
 
 @warmer
@@ -271,5 +349,6 @@ def _warm() -> None:
     g.window_sums(np.ones((2, MOMENTS)), 1)
     g.window_sums(np.ones((2, MOMENTS)), 1, np.array([0, 1]), np.array([1]))
     g.adjacent_pairs()
+    g.adjacent_pairs(np.zeros((2, 3)), 1.0)
     bin_points(np.array([[0.0, 0, 0], [0.001, 0, 0]]), 0.01, 1)
     bin_points(np.zeros((0, 3)), 0.01, 1)

@@ -53,6 +53,41 @@ def test_adjacent_pairs_are_every_26_neighbour_pair_once(n, span, seed):
     assert got == want
 
 
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 60), span=st.integers(1, 5), seed=st.integers(0, 10_000))
+def test_window_sums_add_in_window_order_to_the_bit(n, span, seed):
+    # The column walk adds the cells in the order of the (2w + 1)^3 single lookups it
+    # replaced (dx, dy, dz ascending): the normals downstream keep their bits.
+    ijk, dims = _cells(seed, n, span, 2)
+    mom = np.random.default_rng(seed + 1).normal(size=(len(ijk), 3))
+    got = CellGrid(ijk, dims, 2).window_sums(mom, 2)
+    where = {tuple(c): i for i, c in enumerate(ijk.tolist())}
+    for c in range(len(ijk)):
+        acc = np.zeros(3)
+        for dx in range(-2, 3):
+            for dy in range(-2, 3):
+                for dz in range(-2, 3):
+                    j = where.get((ijk[c, 0] + dx, ijk[c, 1] + dy, ijk[c, 2] + dz))
+                    if j is not None:
+                        acc += mom[j]
+        np.testing.assert_array_equal(got[c], acc)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(0, 80), span=st.integers(1, 6), seed=st.integers(0, 10_000))
+def test_adjacent_pairs_within_a_distance_are_those_numpy_keeps(n, span, seed):
+    ijk, dims = _cells(seed, n, span, 1)
+    grid = CellGrid(ijk, dims, 1)
+    centroid = ijk + np.random.default_rng(seed).uniform(0.0, 1.0, (len(ijk), 3))
+    src, dst = grid.adjacent_pairs()
+    near = np.linalg.norm(centroid[src] - centroid[dst], axis=1) <= 1.25
+    got = grid.adjacent_pairs(centroid, 1.25)
+    np.testing.assert_array_equal(got[0], src[near])
+    np.testing.assert_array_equal(got[1], dst[near])
+    with pytest.raises(ValueError, match="centroids must be"):
+        grid.adjacent_pairs(centroid[:, :2], 1.0)
+
+
 def test_empty_and_one_cell():
     g = CellGrid(np.zeros((0, 3), np.int64), np.array([3, 3, 3]), 1)
     assert g.window_sums(np.zeros((0, 10)), 1).shape == (0, 10)

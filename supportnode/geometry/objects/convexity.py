@@ -81,11 +81,9 @@ def convex_segments(
     while grow and np.median(cells.moments[:, 0]) < _MIN_PER_CELL and cell < _MAX_CELL:
         cell *= 1.5
         cells = make_cells(pts, cell, pad)
-    src, dst = cells.grid.adjacent_pairs()
-    # Adjacent cells whose points lie apart by more than a cell and a half are not linked: a
-    # gap is measured between the points, not between the cells' corners.
-    near = np.linalg.norm(cells.centroid[src] - cells.centroid[dst], axis=1) <= _LINK_CELLS * cell
-    src, dst = src[near], dst[near]
+    # Adjacent cells whose points lie apart by more than a cell and a quarter are not linked:
+    # a gap is measured between the points, not between the cells' corners.
+    src, dst = cells.grid.adjacent_pairs(cells.centroid, _LINK_CELLS * cell)
     normal, variation = window_normals(cells, normal_cells)
     inside = _inside(cells, src, dst, origin)
     normal = orient(normal, cells.centroid, origin, inside)
