@@ -28,3 +28,19 @@ def _reduce_runs(ufunc: np.ufunc, a: np.ndarray, starts: np.ndarray) -> np.ndarr
 def _col(ufunc: np.ufunc, a: np.ndarray) -> np.ndarray:
     """``ufunc.reduce(a, axis=0)`` of a (P, D) array, column by column (same values, faster)."""
     return np.array([ufunc.reduce(a[:, j]) for j in range(a.shape[1])])
+
+
+def _cells_xy(
+    xyz: np.ndarray, rows: np.ndarray | None, lo: np.ndarray, cell: float, floor: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Raster cells (i, j), two (K,) int64, of the points ``xyz[rows]`` (all rows: None) of
+    xyz (P, >= 2), metres, on cells of ``cell`` m from the corner lo (2,):
+    ``np.floor((xyz[rows, :2] - lo) / cell).astype(np.int64)`` (floor False: truncated, as
+    ``astype`` alone) split in columns, the same values. Column by column: numpy runs its
+    inner loop over 2 elements on (K, 2) arrays, 4-5x slower."""
+    out = []
+    for a in range(2):
+        v = xyz[:, a] if rows is None else np.take(xyz[:, a], rows)
+        v = (v - lo[a]) / cell
+        out.append((np.floor(v) if floor else v).astype(np.int64))
+    return out[0], out[1]

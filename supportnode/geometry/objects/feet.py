@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from supportnode.geometry.objects.arrays import _cells_xy
+
 # The largest raster (cells) of an object's feet or of the raised patches around them.
 _MAX_RASTER = 4_000_000
 
@@ -42,15 +44,15 @@ def claim_feet(
     idx = idx[obj_xyz[idx, 2] - obj_height[obj_surface[idx]] <= reach]
     for sid in np.unique(obj_surface[idx]):
         mine = idx[obj_surface[idx] == sid]
-        lo = obj_xyz[mine, :2].min(axis=0)
-        ij = np.floor((obj_xyz[mine, :2] - lo) / cell).astype(np.int64)
-        shape = ij.max(axis=0) + 1
+        lo = np.array([obj_xyz[mine, a].min() for a in range(2)])
+        i, j = _cells_xy(obj_xyz, mine, lo, cell)
+        shape = np.array([i.max() + 1, j.max() + 1])
         if shape[0] * shape[1] > _MAX_RASTER:
             continue  # room structure's feet: left to the surface
         # The lowest object point of each column decides its owner: written last.
         order = np.argsort(-obj_xyz[mine, 2], kind="stable")
         owner = np.full(shape, -1, np.int64)
-        owner[ij[order, 0], ij[order, 1]] = obj_label[mine[order]]
+        owner[i[order], j[order]] = obj_label[mine[order]]
         hi = lo + shape * cell
         q = np.flatnonzero(
             (surface == sid)
@@ -59,8 +61,8 @@ def claim_feet(
             & (xyz[:, 0] < hi[0])
             & (xyz[:, 1] < hi[1])
         )
-        qij = np.minimum(np.floor((xyz[q, :2] - lo) / cell).astype(np.int64), shape - 1)
-        out[q] = owner[qij[:, 0], qij[:, 1]]
+        qi, qj = _cells_xy(xyz, q, lo, cell)
+        out[q] = owner[np.minimum(qi, shape[0] - 1), np.minimum(qj, shape[1] - 1)]
     return out
 
 
@@ -92,14 +94,14 @@ def claim_raised(
     shape = np.floor((xyz[q, :2].max(axis=0) - lo) / cell).astype(np.int64) + 4
     if shape[0] * shape[1] > _MAX_RASTER:
         return out
-    qij = np.floor((xyz[q, :2] - lo) / cell).astype(np.int64)
+    qij = np.stack(_cells_xy(xyz, q, lo, cell), axis=1)
     patch_img = np.zeros(shape, dtype=bool)
     patch_img[qij[:, 0], qij[:, 1]] = True
     patches, n = label8(patch_img)
     # The objects' columns near the patches, their points no higher than reach above them.
     top = xyz[q, 2].max() + reach
     near = np.flatnonzero(obj_label >= 0)
-    oij = np.floor((obj_xyz[near, :2] - lo) / cell).astype(np.int64)
+    oij = np.stack(_cells_xy(obj_xyz, near, lo, cell), axis=1)
     ok = np.all((oij >= 0) & (oij < shape), axis=1) & (obj_xyz[near, 2] <= top)
     who = np.full(shape, -1, np.int64)
     who[oij[ok, 0], oij[ok, 1]] = obj_label[near[ok]]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from supportnode.geometry.objects.arrays import _col
+from supportnode.geometry.objects.arrays import _cells_xy, _col
 from supportnode.kernels.components import label_edges
 from supportnode.kernels.footprint import close3, fill_holes
 
@@ -46,9 +46,9 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     Known false cut: one object whose side profile is an L (a step stool) looks the same.
     """
     lo = _col(np.minimum, p[:, :2])
-    ij = ((p[:, :2] - lo) / cell).astype(np.int64)  # truncation = floor (>= 0)
-    h, w = (int(v) + 1 for v in _col(np.maximum, ij))
-    key = ij[:, 0] * w + ij[:, 1]
+    i, j = _cells_xy(p, None, lo, cell, floor=False)  # truncation = floor (>= 0)
+    h, w = int(i.max()) + 1, int(j.max()) + 1
+    key = i * w + j
     top = np.full(h * w, -np.inf)
     np.maximum.at(top, key, p[:, 2])  # top height of every cell, -inf when empty
     cells = np.flatnonzero(np.isfinite(top))
@@ -134,9 +134,9 @@ def _by_level(p: np.ndarray, lo: np.ndarray, cell: float, level: np.ndarray) -> 
     Points go by a raster three times finer, whose cells take the plateau their top height
     matches (the coarse cells at the step hold both levels), else the nearest such cell.
     """
-    fine = ((p[:, :2] - lo) / (cell / 3.0)).astype(np.int64)
-    fh, fw = (int(v) + 1 for v in _col(np.maximum, fine))
-    fkey = fine[:, 0] * fw + fine[:, 1]
+    fi, fj = _cells_xy(p, None, lo, cell / 3.0, floor=False)
+    fh, fw = int(fi.max()) + 1, int(fj.max()) + 1
+    fkey = fi * fw + fj
     ftop = np.full(fh * fw, -np.inf)
     np.maximum.at(ftop, fkey, p[:, 2])
     gap = np.abs(ftop[:, None] - level[None, :])  # (cells, 2) m; inf for empty cells

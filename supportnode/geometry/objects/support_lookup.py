@@ -132,7 +132,11 @@ class _CellIndex:
         """(P, 2) int64 cell indices of the points on the grid of size cell (2,) m."""
         key = (float(cell[0]), float(cell[1]))
         if key not in self._cache:
-            self._cache[key] = np.floor(self.xy / cell).astype(np.int64)
+            # Column by column: numpy runs its inner loop over 2 elements on (P, 2) arrays.
+            ij = np.empty((len(self.xy), 2), np.int64)
+            for a in range(2):
+                ij[:, a] = np.floor(self.xy[:, a] / cell[a])
+            self._cache[key] = ij
         return self._cache[key]
 
 
