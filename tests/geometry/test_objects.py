@@ -431,9 +431,10 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     keep = hull._column_ends(p)
     assert keep.sum() <= 600
     lo, hi = p.min(axis=0), p.max(axis=0)
-    monkeypatch.setattr(hull, "_COLUMN_DEDUPE_MIN", 10**9)
+    monkeypatch.setattr(hull, "_HULL_MAX_POINTS", 10**9)  # every point to Qhull
     ref_vol = hull._volume(p, lo, hi)
-    monkeypatch.setattr(hull, "_COLUMN_DEDUPE_MIN", 1)
+    monkeypatch.setattr(hull, "_HULL_MAX_POINTS", 1000)  # the lines' ends (600), no sample
+    assert len(hull._hull_candidates(p)) == keep.sum()
     assert hull._volume(p, lo, hi) == pytest.approx(ref_vol, rel=1e-12)
     assert ref_vol == pytest.approx(ConvexHull(p).volume, rel=1e-12)
 

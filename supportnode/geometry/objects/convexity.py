@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.linalg import distances, sym3_eigen_entries
 from supportnode.geometry.objects.bridges import split_bridges, split_necks
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
@@ -327,11 +327,7 @@ def _band(
     above = np.full(len(pts), np.inf)
     band = np.zeros(len(pts))
     sigma = np.zeros(len(pts))
-    r = (
-        np.ones(len(pts))
-        if origin is None
-        else np.linalg.norm(pts - np.asarray(origin, float), axis=1)
-    )
+    r = np.ones(len(pts)) if origin is None else distances(pts, origin)
     for sid in np.unique(support[support >= 0]):
         at = np.flatnonzero(support == sid)
         s = by_id[int(sid)]

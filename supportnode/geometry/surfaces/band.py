@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from supportnode.geometry.linalg import sym3_eigen_entries
+from supportnode.geometry.linalg import distances, sym3_eigen_entries
 from supportnode.geometry.surfaces.noise import NoiseModel, fit_sample
 from supportnode.geometry.surfaces.planar import (
     _label_by_plane_of,
@@ -84,7 +84,7 @@ def label_in_band(
     r_voxel = None
     if sensor_origin is not None:
         centre = (grid.keys + 0.5) * grid.size
-        r_voxel = np.linalg.norm(centre - np.asarray(sensor_origin, np.float64), axis=1)
+        r_voxel = distances(centre, sensor_origin)
     model = fit_sample(grid, labels, best, r_voxel, len(tolerance))
     none = np.zeros(len(tolerance), dtype=bool)
     band = Band(model, params.band_sigmas, params.band_min, r_voxel, none, tolerance)
