@@ -13,11 +13,14 @@ installed, the same run scores the plain Open3D tabletop pipeline (segment_plane
 
 Run: python bench/real_accuracy.py [--scans ../shared/real_scans/mosd_learn] [--every 1]
      [--set objects.method=voxel] [--no-open3d] [--docs]
+Its last line is JSON (mean ARI, parts recovered, median s/scan per method): two revisions
+by turns with ``bench/ab.py --a REV -- bench/real_accuracy.py --no-open3d``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import sys
@@ -257,6 +260,16 @@ def main(argv: list[str] | None = None) -> int:
     load = host_load(load0)
     print(text)
     print(f"host load {load}")
+    # One JSON line for bench/ab.py (revisions compared by turns): medians over all scans.
+    summary = {
+        name: {
+            "ari": float(np.mean([s.ari for s in scores])),
+            "recovered": int(sum(s.recovered for s in scores)),
+            "s_per_scan": float(np.median([s.seconds for s in scores])),
+        }
+        for name, scores in methods.items()
+    }
+    print(json.dumps({"real_accuracy": summary}), flush=True)
     if args.docs:
         cmd = docs_command("real_accuracy.py", argv)
         write_docs_block(REPO / "docs/accuracy.md", "real_accuracy", text, cmd, load)
