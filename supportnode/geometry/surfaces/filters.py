@@ -278,25 +278,32 @@ def _candidates_below(
         return (c[:, 0] - lo[0]) * span + (c[:, 1] - lo[1])
 
     keys = [lin(s.cells) for s in surfaces]  # distinct cells already
+    sorted_keys = [np.sort(k) for k in keys]  # membership by binary search (see _within)
     ring8 = np.array([span * dx + dy for dx in (-1, 0, 1) for dy in (-1, 0, 1) if dx or dy])
     edge4 = np.array([span, -span, 1, -1])
     below = {}
     for i in small:
         s = surfaces[i]
         ring = np.setdiff1d(keys[i][:, None] + ring8, keys[i])
-        inner = keys[i][np.isin(keys[i][:, None] + edge4, keys[i]).all(axis=1)]
+        inner = keys[i][_within(keys[i][:, None] + edge4, sorted_keys[i]).all(axis=1)]
         under = [
             j
             for j, t in enumerate(surfaces)
             if params.max_step < s.height - t.height <= max_height
-            and np.isin(ring, keys[j]).mean() >= _TOP_MIN_AROUND
+            and _within(ring, sorted_keys[j]).mean() >= _TOP_MIN_AROUND
             # Cells are coarse: a box's footprint cells also hold the worktop beside it, but
             # a surface in most of the inner cells is plainly seen under the face.
-            and not (len(inner) and np.isin(inner, keys[j]).mean() >= 0.5)
+            and not (len(inner) and _within(inner, sorted_keys[j]).mean() >= 0.5)
         ]
         if under:
             below[i] = under
     return lin, keys, below
+
+
+def _within(x: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """``np.isin(x, sorted_keys)`` (x's shape) for ascending sorted_keys."""
+    pos = np.minimum(np.searchsorted(sorted_keys, x), max(len(sorted_keys) - 1, 0))
+    return sorted_keys[pos] == x if len(sorted_keys) else np.zeros(x.shape, bool)
 
 
 def _hidden(
