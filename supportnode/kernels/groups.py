@@ -1,5 +1,6 @@
 """Per-label work in one pass over the labels, without grouping rows by a sort first: a few
-rows of each label picked by rank, each label's bounding box.
+rows of each label picked by rank, each label's bounding box; and rows grouped by label by a
+counting sort (two passes) where a stable sort of the labels was used.
 
 The node's obstacles message carries a few evenly spaced points of each cluster: grouping
 all of a map's labelled points by a stable sort to keep 64 of each cost a sort of ~100k
@@ -13,7 +14,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["label_boxes", "rows_at_ranks"]
+__all__ = ["group_rows", "label_boxes", "rows_at_ranks"]
 
 
 @njit(cache=True, nogil=True)
@@ -79,7 +80,62 @@ def label_boxes(points: np.ndarray, labels: np.ndarray, n: int) -> tuple[np.ndar
     return _label_boxes(pts, lab, int(n))
 
 
+@njit(cache=True, nogil=True)
+def _group_rows(points: np.ndarray, labels: np.ndarray, n: int) -> tuple:
+    d = points.shape[1]
+    count = np.zeros(n, np.int64)
+    lo = np.full((n, d), np.inf)
+    hi = np.full((n, d), -np.inf)
+    for i in range(len(labels)):  # counts and boxes
+        lab = labels[i]
+        if lab < 0 or lab >= n:
+            continue
+        count[lab] += 1
+        for a in range(d):
+            v = points[i, a]
+            if v < lo[lab, a]:
+                lo[lab, a] = v
+            if v > hi[lab, a]:
+                hi[lab, a] = v
+    start = np.empty(n + 1, np.int64)
+    start[0] = 0
+    for c in range(n):
+        start[c + 1] = start[c] + count[c]
+    fill = np.empty(n, np.int64)
+    for c in range(n):  # a loop, not a slice copy: those compile for seconds
+        fill[c] = start[c]
+    rows = np.empty(start[n], np.int64)
+    grouped = np.empty((start[n], d))
+    for i in range(len(labels)):  # each row straight to its place, in row order per label
+        lab = labels[i]
+        if lab < 0 or lab >= n:
+            continue
+        j = fill[lab]
+        fill[lab] = j + 1
+        rows[j] = i
+        for a in range(d):
+            grouped[j, a] = points[i, a]
+    return start, rows, grouped, lo, hi
+
+
+def group_rows(
+    points: np.ndarray, labels: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of ``points`` (M, D) float64 grouped by their ``labels`` (M,) int, labels
+    0..n-1 (others left out): (start (n + 1,) int64, each label's run in the next two; rows
+    (R,) int64, the rows by label, in row order within a label (a stable sort's); grouped
+    (R, D) float64, their points; lo, hi (n, D), each label's box, inf / -inf with no row).
+    The same as ``np.argsort(labels, kind="stable")`` past the negative labels and a gather,
+    in two passes."""
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    lab = np.ascontiguousarray(labels, dtype=np.int64)
+    if pts.ndim != 2 or lab.shape != (len(pts),):
+        raise ValueError(f"group_rows: points (M, D) and labels (M,), got {pts.shape}, {lab.shape}")
+    return _group_rows(pts, lab, int(n))
+
+
 @warmer
 def _warm() -> None:
     rows_at_ranks(np.array([0, -1, 0]), np.array([1]), np.array([0, 1]))
     label_boxes(np.zeros((2, 3)), np.array([0, -1]), 1)
+    group_rows(np.zeros((2, 3)), np.array([0, -1]), 1)

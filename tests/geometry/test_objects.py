@@ -415,15 +415,13 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     """The speed-ups of the voxel method give the same answer as the straightforward code."""
     import scipy.ndimage as ndi
 
-    from supportnode.geometry.objects import arrays, clusters, hull, support_lookup
+    from supportnode.geometry.objects import clusters, hull, support_lookup
     from supportnode.kernels.footprint import fill_holes
 
     rng = np.random.default_rng(7)
     for _ in range(20):  # hole filling by one labelling == binary_fill_holes
         mask = rng.random((rng.integers(3, 40), rng.integers(3, 40))) < rng.uniform(0.3, 0.8)
         np.testing.assert_array_equal(fill_holes(mask), ndi.binary_fill_holes(mask))
-    lab = rng.integers(-1, 300, 5000)
-    np.testing.assert_array_equal(arrays._group_by_label(lab), np.argsort(lab, kind="stable"))
 
     # Points on vertical lines: dropping the inner ones keeps the hull's volume.
     xy = rng.uniform(0, 1, (300, 2))

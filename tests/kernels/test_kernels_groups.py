@@ -1,4 +1,5 @@
-"""Rows of each label at given ranks, in one pass: np.flatnonzero(labels == c)[ranks]."""
+"""Per-label kernels: rows at given ranks (np.flatnonzero(labels == c)[ranks]), rows grouped by
+label (a stable argsort and a gather)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from supportnode.kernels.groups import label_boxes, rows_at_ranks
+from supportnode.kernels.groups import group_rows, label_boxes, rows_at_ranks
 
 
 @settings(max_examples=80, deadline=None)
@@ -61,3 +62,28 @@ def test_label_boxes_are_each_labels_min_and_max(m, n, seed):
             np.testing.assert_array_equal(hi[c], mine.max(axis=0))
     with pytest.raises(ValueError, match="labels"):
         label_boxes(pts, labels[:-1] if m else np.zeros(1, np.int64), n)
+
+
+@settings(max_examples=80, deadline=None)
+@given(m=st.integers(0, 300), n=st.integers(0, 10), seed=st.integers(0, 10_000))
+def test_rows_grouped_as_a_stable_argsort_and_a_gather(m, n, seed):
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(-1, n + 2, m)  # labels >= n are left out, as -1
+    points = rng.normal(size=(m, 3))
+    start, rows, grouped, lo, hi = group_rows(points, labels, n)
+    inside = (labels >= 0) & (labels < n)
+    order = np.argsort(np.where(inside, labels, -1), kind="stable")[int((~inside).sum()) :]
+    np.testing.assert_array_equal(rows, order)
+    np.testing.assert_array_equal(grouped, points[order])
+    np.testing.assert_array_equal(
+        start, np.r_[0, np.cumsum(np.bincount(labels[inside], minlength=n))]
+    )
+    for c in range(n):
+        mine = points[labels == c]
+        if len(mine):
+            np.testing.assert_array_equal(lo[c], mine.min(axis=0))
+            np.testing.assert_array_equal(hi[c], mine.max(axis=0))
+        else:
+            assert np.isinf(lo[c]).all() and np.isinf(hi[c]).all()
+    with pytest.raises(ValueError, match="group_rows"):
+        group_rows(points[:, :2].ravel(), labels, n)

@@ -1,28 +1,11 @@
-"""Array helpers of the object code: grouping points by label, reductions over runs of rows
-and columns; each gives the same values as the plain numpy call it replaces (see each
-docstring), only faster on the shapes used here.
+"""Array helpers of the object code: reductions over columns, raster cells of points; each
+gives the same values as the plain numpy call it replaces (see each docstring), only faster
+on the shapes used here.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-
-def _group_by_label(lab: np.ndarray) -> np.ndarray:
-    """``np.argsort(lab, kind="stable")`` of labels lab (M,) >= -1, as a radix sort when the
-    labels fit in 16 bits (the same permutation: a stable sort of equal keys is unique), which
-    is 10x faster than the comparison sort numpy uses for int64 keys."""
-    if len(lab) and lab.max() < np.iinfo(np.uint16).max:
-        return np.argsort((lab + 1).astype(np.uint16), kind="stable")
-    return np.argsort(lab, kind="stable")
-
-
-def _reduce_runs(ufunc: np.ufunc, a: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """ufunc.reduce over the row runs of a (P, D) starting at starts (R,): (R, D).
-
-    Column by column: numpy reduces (P, 3) arrays along axis 0 10-30x slower than 1-D ones.
-    """
-    return np.stack([ufunc.reduceat(a[:, j], starts) for j in range(a.shape[1])], axis=1)
 
 
 def _col(ufunc: np.ufunc, a: np.ndarray) -> np.ndarray:

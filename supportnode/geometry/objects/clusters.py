@@ -19,11 +19,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from supportnode.geometry.objects.arrays import _group_by_label, _reduce_runs
 from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.geometry.objects.result import Segmentation
 from supportnode.geometry.objects.support_lookup import _SupportLookup, _supports
 from supportnode.kernels.components import label_edges, label_voxel_grid
+from supportnode.kernels.groups import group_rows
 from supportnode.kernels.occupancy import grid_keys, occupied_voxels
 from supportnode.params import ObjectParams
 
@@ -138,17 +138,15 @@ def _voxel_links_sorted(
 
 def _drop_small(lab: np.ndarray, min_points: int) -> np.ndarray:
     """Relabel to 0..K-1 keeping components with >= min_points points; others become -1."""
-    out = np.full(len(lab), -1, dtype=np.int64)
-    ok = lab >= 0
-    if not ok.any():
-        return out
-    # Counting instead of np.unique: no sort, and kept labels stay in ascending order.
-    counts = np.bincount(lab[ok])
+    if len(lab) == 0 or lab.max() < 0:
+        return np.full(len(lab), -1, dtype=np.int64)
+    # Counting instead of np.unique: no sort, and kept labels stay in ascending order; label
+    # -1 counted first, then mapped by the table's last entry: one gather, no masks.
+    counts = np.bincount(lab + 1)[1:]
     keep = counts >= min_points
-    new_id = np.full(len(counts), -1, dtype=np.int64)
-    new_id[keep] = np.arange(int(keep.sum()))
-    out[ok] = new_id[lab[ok]]
-    return out
+    new_id = np.full(len(counts) + 1, -1, dtype=np.int64)
+    new_id[:-1][keep] = np.arange(int(keep.sum()))
+    return new_id[lab]
 
 
 def _order(
@@ -170,26 +168,20 @@ def _order(
         none = np.zeros((0, 3))
         return Segmentation(out, np.zeros(0, np.int64), none, none.copy())
     n = int(lab.max()) + 1
-    # One stable sort by label: each cluster's points are then a contiguous run, in input order.
-    grouped = _group_by_label(lab)
-    bounds = np.searchsorted(lab[grouped], np.arange(0, n + 1))
+    # Grouped by label (a counting sort, stable): each cluster's points a contiguous run, in
+    # input order; with each cluster's box.
+    bounds, _, in_clusters, mins, maxs = group_rows(cp, lab, n)
     counts = np.diff(bounds)
     present = np.flatnonzero(counts > 0)
     # Ties in size broken by the lowest corner: invariant to point order and to translation.
-    mins = np.full((n, 3), np.inf)
-    maxs = np.full((n, 3), -np.inf)
-    in_clusters = np.take(cp, grouped[bounds[0] :], axis=0)  # all clustered points, by cluster
-    mins[present] = _reduce_runs(np.minimum, in_clusters, bounds[present] - bounds[0])
-    maxs[present] = _reduce_runs(np.maximum, in_clusters, bounds[present] - bounds[0])
     order = present[
         np.lexsort((mins[present, 2], mins[present, 1], mins[present, 0], -counts[present]))
     ]
-    new_id = np.full(n, -1, dtype=np.int64)
+    new_id = np.full(n + 1, -1, dtype=np.int64)  # the last, -1, is label -1's: one gather
     new_id[order] = np.arange(len(order))
-    ok = lab >= 0
-    out[ok] = new_id[lab[ok]]
+    out = new_id[lab]
     # Each cluster's run of in_clusters, in the new order.
-    runs = np.stack([bounds[order] - bounds[0], bounds[order + 1] - bounds[0]], axis=1)
+    runs = np.stack([bounds[order], bounds[order + 1]], axis=1)
     if known is None:
         sids = _supports(in_clusters, runs, lookups, params.support_tolerance)
     else:

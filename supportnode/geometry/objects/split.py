@@ -18,11 +18,11 @@ import functools
 import numpy as np
 
 from supportnode.geometry.memo import Memo
-from supportnode.geometry.objects.arrays import _group_by_label
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.split_concave import _CONCAVE_MAX_EXTENT, _split_concave
 from supportnode.geometry.objects.split_footprint import Fill, _may_split, _split_recursive
 from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_step
+from supportnode.kernels.groups import group_rows
 from supportnode.params import ObjectParams
 
 # Footprint raster cell = voxel_size / this (1 cm at the default 3 cm voxels).
@@ -51,20 +51,18 @@ def _split_touching(
     out = lab.copy()
     if n == 0:
         return out
-    order = _group_by_label(lab)
-    bounds = np.searchsorted(lab[order], np.arange(-1, n + 1))
-    # Footprint extents of all clusters at once, to skip the clusters too narrow to split
-    # without gathering their points (most clusters: wall strips, small objects).
+    # The clusters' rows (a stable counting sort) and boxes, to skip the clusters too narrow
+    # to split without gathering their points (most clusters: wall strips, small objects).
+    start, order, _, box_lo, box_hi = group_rows(cp, lab, n)
+    nonempty = start[1:] > start[:-1]
+    box_lo[~nonempty] = 0.0
+    box_hi[~nonempty] = 0.0
+    lo, hi = box_lo[:, :2], box_hi[:, :2]
     # Contiguous (np.take on a strided view copies it first), column by column: copying the
     # (M, 2) view in one go runs numpy's inner loop over 2 elements, 6x slower.
     all_xy = np.empty((len(cp), 2))
     all_xy[:, 0] = cp[:, 0]
     all_xy[:, 1] = cp[:, 1]
-    xy = np.take(all_xy, order[bounds[1] :], axis=0)
-    starts = np.minimum(bounds[1:-1] - bounds[1], len(xy) - 1)
-    nonempty = bounds[2:] > bounds[1:-1]
-    lo = np.minimum.reduceat(xy, starts, axis=0)
-    hi = np.maximum.reduceat(xy, starts, axis=0)
     shape = np.floor((hi - lo) / cell).astype(np.int64) + 3  # as _split_footprint rasterises
     next_id = n
     # Room structure (a ring of walls, a counter's run of cabinets) is no object to part: its
@@ -74,10 +72,10 @@ def _split_touching(
     room = (hi - lo).max(axis=1) > _MAX_EXTENT
     tried = np.flatnonzero(nonempty & _may_split(shape, cell, radius) & ~room)
     bottom = np.full(n + 1, -np.inf)  # the last: no cluster
-    bottom[:n][nonempty] = np.minimum.reduceat(cp[order[bounds[1] :], 2], starts)[nonempty]
+    bottom[:n][nonempty] = box_lo[nonempty, 2]
     point_bottom = bottom[lab]  # (M,) the lowest height of each point's cluster
     for c in tried:
-        idx = order[bounds[c + 1] : bounds[c + 2]]
+        idx = order[start[c] : start[c + 1]]
         extent = float((hi[c] - lo[c]).max())
         fill = functools.partial(_fill_xy, cp, lab, idx, point_bottom, lo[c], hi[c], params, origin)
         if memo is None:  # the fill is found only for a cluster with a neck
