@@ -194,6 +194,24 @@ def _grid(pts: np.ndarray, k: int) -> KnnGrid | None:
     return KnnGrid.build(pts, 0.7 * typical)
 
 
+def normals_among(
+    points: np.ndarray, query: np.ndarray, k: int, spacing: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """`normals_at` of ``query`` (M, 3) among ``points`` (N, 3), float64 metres, without a
+    k-d tree: the neighbours come from a grid of cells ``spacing`` m wide (about twice a
+    typical k-th neighbour distance is quickest), or from a tree where that grid would not fit
+    in memory. Both searches are exact: the same neighbours, the same normals."""
+    from supportnode.kernels.knn import KnnGrid
+
+    k = int(min(k, len(points)))
+    grid = KnnGrid.build(points, spacing) if k >= 1 and spacing > 0 else None
+    if grid is None:
+        return normals_at(
+            cKDTree(points, balanced_tree=False, compact_nodes=False), points, query, k
+        )
+    return _grid_normals(grid, query, k)
+
+
 def _grid_normals(grid: KnnGrid, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """`normals_at` with the neighbours from ``grid`` (the points' own), chunk by chunk."""
     m = len(query)

@@ -152,3 +152,22 @@ def test_grid_normals_of_queries_in_any_order_match_the_k_d_tree():
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
     assert mod._grid(pts[:100], 20) is None
+
+
+def test_normals_among_any_cell_spacing_are_the_k_d_trees():
+    """`normals_among` (the surfaces' clutter filter) searches through cells of any spacing,
+    or a k-d tree where the cells would not fit: the same normals and curvature either way."""
+    from scipy.spatial import cKDTree
+
+    from supportnode.geometry import normals as mod
+
+    rng = np.random.default_rng(8)
+    pts = np.concatenate(
+        [_plane(rng, 2000, rng.normal(size=3), rng.uniform(-1, 1, 3)) for _ in range(2)]
+    )
+    query = pts[rng.permutation(len(pts))[:300]]
+    want = mod.normals_at(cKDTree(pts), pts, query, 10)
+    for spacing in (0.01, 0.1, 1.0, 1e-9):  # the last: too many cells, the tree's path
+        got = mod.normals_among(pts, query, 10, spacing)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
