@@ -10,9 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-# Footprints of up to this many vertices get their oriented boxes in one batch (see
-# _oriented_rects), padded to the largest: at most 64 x 64 directions x vertices per cluster.
-_RECT_BATCH_MAX = 64
+from supportnode.kernels.rects import min_area_boxes
+
 # Clusters of more points than this take their 3-D hull from the ends of their vertical lines
 # (see _column_ends) and, if still more, from an even sample of those (see _hull_candidates).
 # Qhull takes fewer whole: a depth camera's points make no vertical lines, and grouping them
@@ -89,45 +88,31 @@ def _oriented_rect(xy: np.ndarray) -> tuple[np.ndarray, float, float, float]:
 def _oriented_rects(polys: list[np.ndarray]) -> list[tuple[np.ndarray, float, float, float]]:
     """:func:`_oriented_rect` of each polygon of polys (K_i, 2), the same values.
 
-    Polygons of 3 to _RECT_BATCH_MAX vertices go in one batch: each is padded to the largest
-    K with copies of its last vertex (which change no extent) and its padded directions are
-    never chosen; every value comes from the same element-wise operations as one at a time,
-    without some 20 numpy calls per cluster. Others (degenerate, or so large that padding all
-    to them would cost more) are done one by one.
+    Polygons of 3 vertices or more go to one compiled pass (`kernels.rects`: the same
+    element-wise operations as one at a time, with the edges' angles, cosines and sines
+    still numpy's), without some 20 numpy calls per cluster; degenerate ones one by one.
     """
     out: list = [None] * len(polys)
     k = np.array([len(xy) for xy in polys], dtype=np.int64)
-    batch = np.flatnonzero((k >= 3) & (k <= _RECT_BATCH_MAX))
-    for i in np.flatnonzero((k < 3) | (k > _RECT_BATCH_MAX)):
+    batch = np.flatnonzero(k >= 3)
+    for i in np.flatnonzero(k < 3):
         out[i] = _oriented_rect(polys[i])
     if len(batch) == 0:
         return out
     kb = k[batch]
     starts = np.cumsum(kb) - kb
     xy = np.concatenate([polys[i] for i in batch])  # (N, 2)
-    t = np.arange(int(kb.max()))
-    # Row t of polygon j, or its last vertex past the end: (B, T) flat indices into xy.
-    idx = starts[:, None] + np.minimum(t[None, :], kb[:, None] - 1)
     nxt = np.arange(len(xy)) + 1
     nxt[starts + kb - 1] = starts  # each polygon's last vertex closes onto its first
     edges = np.take(xy, nxt, axis=0) - xy  # (N, 2), as np.roll(xy, -1, axis=0) - xy
-    flat = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
-    angles, cos, sin = flat[idx], np.cos(flat)[idx], np.sin(flat)[idx]  # (B, T)
-    x, y = xy[idx, 0][:, :, None], xy[idx, 1][:, :, None]  # (B, T, 1): vertex along axis 1
-    u = x * cos[:, None, :] + y * sin[:, None, :]  # (B, T, A)
-    v = -x * sin[:, None, :] + y * cos[:, None, :]
-    u_max, u_min = u.max(axis=1), u.min(axis=1)
-    v_max, v_min = v.max(axis=1), v.min(axis=1)
-    ext_u, ext_v = u_max - u_min, v_max - v_min  # (B, A)
-    score = ext_u * ext_v + 1e-12 * angles
-    score[t[None, :] >= kb[:, None]] = np.inf  # padded directions
-    best = np.argmin(score, axis=1)  # ties: the smallest angle, as _oriented_rect
-    rb = np.arange(len(batch))
-    a, c, s = angles[rb, best], cos[rb, best], sin[rb, best]
-    mu = (u_max[rb, best] + u_min[rb, best]) / 2
-    mv = (v_max[rb, best] + v_min[rb, best]) / 2
+    angles = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
+    cos, sin = np.cos(angles), np.sin(angles)
+    best, ext = min_area_boxes(xy[:, 0], xy[:, 1], np.r_[starts, len(xy)], angles, cos, sin)
+    a, c, s = angles[best], cos[best], sin[best]
+    mu = (ext[:, 0] + ext[:, 1]) / 2
+    mv = (ext[:, 2] + ext[:, 3]) / 2
     centre = np.stack([mu * c - mv * s, mu * s + mv * c], axis=1)
-    length, width = ext_u[rb, best], ext_v[rb, best]
+    length, width = ext[:, 0] - ext[:, 1], ext[:, 2] - ext[:, 3]
     swap = width > length
     length, width = np.where(swap, width, length), np.where(swap, length, width)
     a = np.where(swap, a + np.pi / 2, a)
