@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from supportnode.errors import AlignmentError, InputError
 from supportnode.geometry.gravity.choice import choose_up, fmt_vector
@@ -27,7 +26,7 @@ from supportnode.geometry.gravity.families import (
     plane_normal,
     refine_axis,
 )
-from supportnode.geometry.normals import normals_at
+from supportnode.geometry.normals import normals_among
 from supportnode.kernels.downsample import voxel_moments
 from supportnode.params import GravityParams
 
@@ -126,7 +125,9 @@ def estimate_gravity(
         if hint is not None:
             return _from_hint(hint, None, params, what)
         raise AlignmentError(f"no horizontal surface in view: {what}; {_ADVICE}")
-    normals, curvature = normals_at(cKDTree(ds), ds, ds, _K)
+    # Voxel centroids on a plane lie a voxel apart: the k-th neighbour ~voxel * sqrt(k / pi)
+    # away; cells of twice that are the exact grid search's quickest (no k-d tree to build).
+    normals, curvature = normals_among(ds, ds, _K, 2.0 * voxel * np.sqrt(_K / np.pi))
     planar = np.flatnonzero(curvature < _MAX_CURVATURE)
     min_support = max(_MIN_FAMILY_POINTS, int(np.ceil(_MIN_FAMILY_FRACTION * ds.shape[0])))
     fams, best = find_families(normals, planar, params.inlier_angle_deg, min_support)
