@@ -328,7 +328,8 @@ def _band(
     band = np.zeros(len(pts))
     sigma = np.zeros(len(pts))
     r = np.ones(len(pts)) if origin is None else distances(pts, origin)
-    for sid in np.unique(support[support >= 0]):
+    # The surfaces under any point, ascending: counted, not sorted (np.unique's sort).
+    for sid in np.flatnonzero(np.bincount(support + 1)[1:]):
         at = np.flatnonzero(support == sid)
         s = by_id[int(sid)]
         above[at] = pts[at, 2] - s.height
