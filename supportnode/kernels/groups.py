@@ -48,6 +48,17 @@ def rows_at_ranks(labels: np.ndarray, ranks: np.ndarray, starts: np.ndarray) -> 
     return _rows_at_ranks(lab, rk, st)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _widen(lo: np.ndarray, hi: np.ndarray, points: np.ndarray, i: int, lab: int) -> None:
+    # Label lab's box (rows of lo, hi) widened to take row i of points.
+    for a in range(points.shape[1]):
+        v = points[i, a]
+        if v < lo[lab, a]:
+            lo[lab, a] = v
+        if v > hi[lab, a]:
+            hi[lab, a] = v
+
+
 @njit(cache=True, nogil=True)
 def _label_boxes(points: np.ndarray, labels: np.ndarray, n: int) -> tuple:
     d = points.shape[1]
@@ -57,12 +68,7 @@ def _label_boxes(points: np.ndarray, labels: np.ndarray, n: int) -> tuple:
         lab = labels[i]
         if lab < 0 or lab >= n:
             continue
-        for a in range(d):
-            v = points[i, a]
-            if v < lo[lab, a]:
-                lo[lab, a] = v
-            if v > hi[lab, a]:
-                hi[lab, a] = v
+        _widen(lo, hi, points, i, lab)
     return lo, hi
 
 
@@ -91,12 +97,7 @@ def _group_rows(points: np.ndarray, labels: np.ndarray, n: int) -> tuple:
         if lab < 0 or lab >= n:
             continue
         count[lab] += 1
-        for a in range(d):
-            v = points[i, a]
-            if v < lo[lab, a]:
-                lo[lab, a] = v
-            if v > hi[lab, a]:
-                hi[lab, a] = v
+        _widen(lo, hi, points, i, lab)
     start = np.empty(n + 1, np.int64)
     start[0] = 0
     for c in range(n):
