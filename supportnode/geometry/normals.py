@@ -195,32 +195,37 @@ def _grid(pts: np.ndarray, k: int) -> KnnGrid | None:
 
 
 def normals_among(
-    points: np.ndarray, query: np.ndarray, k: int, spacing: float
+    points: np.ndarray, query: np.ndarray, k: int, spacing: float, workers: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """`normals_at` of ``query`` (M, 3) among ``points`` (N, 3), float64 metres, without a
-    k-d tree: the neighbours come from a grid of cells ``spacing`` m wide (about twice a
-    typical k-th neighbour distance is quickest), or from a tree where that grid would not fit
-    in memory. Both searches are exact: the same neighbours, the same normals."""
-    from supportnode.kernels.knn import KnnGrid
+    """`normals_at` of ``query`` (M, 3) among ``points`` (N, 3), float64 metres, on this
+    thread: the neighbours come from a grid of cells ``spacing`` m wide (about twice a
+    typical k-th neighbour distance is quickest), or from a k-d tree where that grid would not
+    fit in memory, or for a big query with ``workers`` != 1 (its threads: the grid's parallel
+    search compiles on its first use, seconds into a node's first scans after an install).
+    Every search is exact: the same neighbours, the same normals."""
+    from supportnode.kernels.knn import _PARALLEL_MIN_QUERIES, KnnGrid
 
     k = int(min(k, len(points)))
-    grid = KnnGrid.build(points, spacing) if k >= 1 and spacing > 0 else None
+    big = workers != 1 and len(query) >= _PARALLEL_MIN_QUERIES
+    grid = KnnGrid.build(points, spacing) if k >= 1 and spacing > 0 and not big else None
     if grid is None:
-        return normals_at(
-            cKDTree(points, balanced_tree=False, compact_nodes=False), points, query, k
-        )
-    return _grid_normals(grid, query, k)
+        tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        return normals_at(tree, points, query, k, workers)
+    return _grid_normals(grid, query, k, parallel=False)
 
 
-def _grid_normals(grid: KnnGrid, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """`normals_at` with the neighbours from ``grid`` (the points' own), chunk by chunk."""
+def _grid_normals(
+    grid: KnnGrid, query: np.ndarray, k: int, parallel: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """`normals_at` with the neighbours from ``grid`` (the points' own), chunk by chunk
+    (``parallel``: as `KnnGrid.query`)."""
     m = len(query)
     normals = np.empty((m, 3), dtype=np.float64)
     curvature = np.empty(m, dtype=np.float64)
     c = _centred(grid.points)
     chunk = max(1, _CHUNK_VALUES // k)
     for start in range(0, m, chunk):  # ~20k queries at a time: bounded memory
-        idx = grid.query(query[start : start + chunk], k)
+        idx = grid.query(query[start : start + chunk], k, parallel)
         _chunk_normals(c, idx, normals, curvature, start)
     return normals, curvature
 

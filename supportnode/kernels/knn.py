@@ -258,10 +258,11 @@ class KnnGrid:
         start, sp, si = _bin(pts, lo, 1.0 / size, dims)
         return cls(pts, lo, float(size), dims, start, sp, si)
 
-    def query(self, query: np.ndarray, k: int) -> np.ndarray:
+    def query(self, query: np.ndarray, k: int, parallel: bool = True) -> np.ndarray:
         """(M, k) int64 rows of the k nearest points of each of ``query`` (M, 3) float64 m,
-        nearest first (equal distances by row). Raises ValueError for k outside [1, N] or
-        non-finite queries."""
+        nearest first (equal distances by row); ``parallel`` False keeps a big query on this
+        thread (the node's detection: no second core to take, no parallel kernel to compile
+        on a first scan). Raises ValueError for k outside [1, N] or non-finite queries."""
         qry = np.ascontiguousarray(query, dtype=np.float64)
         if qry.ndim != 2 or qry.shape[1] != 3:
             raise ValueError(f"query must be (M, 3), got {qry.shape}")
@@ -269,7 +270,7 @@ class KnnGrid:
             raise ValueError(f"k must lie in [1, {len(self.points)}], got {k}")
         if not np.isfinite(qry).all():
             raise ValueError("queries must be finite")
-        if len(qry) < _PARALLEL_MIN_QUERIES:
+        if not parallel or len(qry) < _PARALLEL_MIN_QUERIES:
             return _query_serial(qry, int(k), *self._arrays())
         global _layer_chosen
         if not _layer_chosen:

@@ -154,7 +154,7 @@ def test_grid_normals_of_queries_in_any_order_match_the_k_d_tree():
     assert mod._grid(pts[:100], 20) is None
 
 
-def test_normals_among_any_cell_spacing_are_the_k_d_trees():
+def test_normals_among_any_cell_spacing_are_the_k_d_trees(monkeypatch: pytest.MonkeyPatch):
     """`normals_among` (the surfaces' clutter filter) searches through cells of any spacing,
     or a k-d tree where the cells would not fit: the same normals and curvature either way."""
     from scipy.spatial import cKDTree
@@ -171,3 +171,11 @@ def test_normals_among_any_cell_spacing_are_the_k_d_trees():
         got = mod.normals_among(pts, query, 10, spacing)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
+    # A big query with workers goes to the tree's threads (no grid built), the same normals.
+    from supportnode.kernels import knn
+
+    monkeypatch.setattr(knn, "_PARALLEL_MIN_QUERIES", 100)
+    monkeypatch.setattr(knn.KnnGrid, "build", lambda *a: pytest.fail("grid built"))
+    got = mod.normals_among(pts, query, 10, 0.1, workers=-1)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])

@@ -128,3 +128,5 @@ def test_parallel_and_serial_searches_give_the_same_rows():
     assert np.array_equal(parallel, serial)
     small = grid.query(pts[:100], 8)  # few: the serial twin
     assert np.array_equal(small, serial[:100])
+    # Kept on the caller's thread on request, however many: the same rows.
+    assert np.array_equal(grid.query(pts, 8, parallel=False), serial)

@@ -127,7 +127,7 @@ def estimate_gravity(
         raise AlignmentError(f"no horizontal surface in view: {what}; {_ADVICE}")
     # Voxel centroids on a plane lie a voxel apart: the k-th neighbour ~voxel * sqrt(k / pi)
     # away; cells of twice that are the exact grid search's quickest (no k-d tree to build).
-    normals, curvature = normals_among(ds, ds, _K, 2.0 * voxel * np.sqrt(_K / np.pi))
+    normals, curvature = normals_among(ds, ds, _K, 2.0 * voxel * np.sqrt(_K / np.pi), workers=-1)
     planar = np.flatnonzero(curvature < _MAX_CURVATURE)
     min_support = max(_MIN_FAMILY_POINTS, int(np.ceil(_MIN_FAMILY_FRACTION * ds.shape[0])))
     fams, best = find_families(normals, planar, params.inlier_angle_deg, min_support)
