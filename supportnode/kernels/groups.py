@@ -14,7 +14,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["group_rows", "label_boxes", "rows_at_ranks"]
+__all__ = ["group_rows", "label_boxes", "rows_at_ranks", "run_sums"]
 
 
 @njit(cache=True, nogil=True)
@@ -135,8 +135,37 @@ def group_rows(
     return _group_rows(pts, lab, int(n))
 
 
+@njit(cache=True, nogil=True)
+def _run_sums(points: np.ndarray, begin: np.ndarray, end: np.ndarray) -> np.ndarray:
+    out = np.zeros((len(begin), points.shape[1]))
+    for j in range(len(begin)):
+        if end[j] <= begin[j]:
+            continue
+        for a in range(points.shape[1]):
+            acc = points[begin[j], a]  # the first value, then left to right: cumsum's order
+            for i in range(begin[j] + 1, end[j]):
+                acc += points[i, a]
+            out[j, a] = acc
+    return out
+
+
+def run_sums(points: np.ndarray, begin: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(C, D) float64 sums of the rows ``begin[c]:end[c]`` of ``points`` (P, D), each column
+    added left to right from its first value: ``np.cumsum(points[b:e], axis=0)[-1]`` to the
+    bit (0 for an empty run). Raises ValueError on runs outside the rows."""
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    lo = np.ascontiguousarray(begin, dtype=np.int64)
+    hi = np.ascontiguousarray(end, dtype=np.int64)
+    if pts.ndim != 2 or lo.ndim != 1 or lo.shape != hi.shape:
+        raise ValueError(f"run_sums: points (P, D), begin and end (C,); got {pts.shape}")
+    if len(lo) and (lo.min() < 0 or hi.max() > len(pts)):
+        raise ValueError("run_sums: each run must lie within the rows")
+    return _run_sums(pts, lo, hi)
+
+
 @warmer
 def _warm() -> None:
     rows_at_ranks(np.array([0, -1, 0]), np.array([1]), np.array([0, 1]))
     label_boxes(np.zeros((2, 3)), np.array([0, -1]), 1)
     group_rows(np.zeros((2, 3)), np.array([0, -1]), 1)
+    run_sums(np.zeros((2, 3)), np.array([0]), np.array([2]))

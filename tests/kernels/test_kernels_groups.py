@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from supportnode.kernels.groups import group_rows, label_boxes, rows_at_ranks
+from supportnode.kernels.groups import group_rows, label_boxes, rows_at_ranks, run_sums
 
 
 @settings(max_examples=80, deadline=None)
@@ -87,3 +87,20 @@ def test_rows_grouped_as_a_stable_argsort_and_a_gather(m, n, seed):
             assert np.isinf(lo[c]).all() and np.isinf(hi[c]).all()
     with pytest.raises(ValueError, match="group_rows"):
         group_rows(points[:, :2].ravel(), labels, n)
+
+
+@settings(max_examples=60, deadline=None)
+@given(p=st.integers(0, 300), c=st.integers(0, 8), seed=st.integers(0, 10_000))
+def test_run_sums_are_cumsums_last_rows_to_the_bit(p, c, seed):
+    # Far from the origin and of mixed scale: the order of the additions shows in the bits.
+    rng = np.random.default_rng(seed)
+    points = rng.normal(0, 1, (p, 3)) * rng.uniform(1e-3, 1e3, (p, 1)) + 1e4
+    begin = rng.integers(0, p + 1, c)
+    end = np.minimum(begin + rng.integers(0, 50, c), p)
+    got = run_sums(points, begin, end)
+    for j in range(c):
+        run = points[begin[j] : end[j]]
+        want = np.cumsum(run, axis=0)[-1] if len(run) else np.zeros(3)
+        np.testing.assert_array_equal(got[j], want)
+    with pytest.raises(ValueError, match="within the rows"):
+        run_sums(points, np.array([0]), np.array([p + 1]))

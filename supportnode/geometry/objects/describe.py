@@ -16,6 +16,7 @@ from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.hull import _oriented_rects, _volume
 from supportnode.geometry.objects.result import Cluster, Segmentation
 from supportnode.geometry.objects.support import supported_by
+from supportnode.kernels.groups import run_sums
 from supportnode.kernels.hull import footprint_hulls
 
 
@@ -26,9 +27,8 @@ def _describe(seg: Segmentation, memo: Memo | None = None, volumes: bool = True)
         return []
     runs = seg._runs.tolist()
     groups = [seg._grouped[a:b] for a, b in runs]  # one slice per cluster
-    # Coordinates as rows (3, P): each cluster's centroid is then one cumsum along contiguous
-    # rows (see _make_cluster).
-    rows = np.ascontiguousarray(seg._grouped.T)
+    # Each cluster's coordinates summed in point order (as p.mean(axis=0) does), in one pass.
+    sums = run_sums(seg._grouped, seg._runs[:, 0], seg._runs[:, 1])
     lo, hi = seg.bbox_min, seg.bbox_max  # bounding boxes: the same min / max as per cluster
     rows_of, ring = footprint_hulls(seg._grouped, seg._runs[:, 0], seg._runs[:, 1])
     corners = seg._grouped[rows_of, :2]  # every ring's vertices, gathered once
@@ -48,7 +48,8 @@ def _describe(seg: Segmentation, memo: Memo | None = None, volumes: bool = True)
     return [
         _make_cluster(
             cid,
-            rows[:, runs[cid][0] : runs[cid][1]],
+            sums[cid] / (runs[cid][1] - runs[cid][0]),
+            runs[cid][1] - runs[cid][0],
             lo[cid],
             hi[cid],
             None if sid < 0 else int(sid),
@@ -69,7 +70,8 @@ def _pairs(starts: np.ndarray) -> list[tuple[int, int]]:
 
 def _make_cluster(
     cid: int,
-    rows: np.ndarray,
+    centroid: np.ndarray,
+    n: int,
     lo: np.ndarray,
     hi: np.ndarray,
     sid: int | None,
@@ -77,23 +79,20 @@ def _make_cluster(
     hull: tuple[np.ndarray, float],
     rect: tuple[np.ndarray, float, float, float],
 ) -> Cluster:
-    """Properties of one cluster standing on surface sid (heights by surface id).
+    """Properties of one cluster of n points standing on surface sid (heights by surface id).
 
-    rows: the cluster's points transposed (3, P), C-contiguous; lo, hi: (3,) their bounding
-    box; hull: footprint (K, 2) and volume (m^3, NaN: not taken); rect: oriented box of the footprint (see
+    centroid: (3,) the mean of its points; lo, hi: (3,) their bounding box; hull: footprint
+    (K, 2) and volume (m^3, NaN: not taken); rect: oriented box of the footprint (see
     _oriented_rect).
     """
     base = height_of[sid] if sid is not None else lo[2]
     footprint, volume = hull
     centre_xy, length, width, yaw = rect
-    n = rows.shape[1]
     return Cluster(
         id=cid,
         surface_id=sid,
         point_count=n,
-        # p.mean(axis=0) sums each column in point order (not pairwise); so does cumsum, 3x
-        # faster along contiguous rows: the same bits.
-        centroid=np.cumsum(rows, axis=1)[:, -1] / n,
+        centroid=centroid,
         bbox_min=lo,
         bbox_max=hi,
         obb_center=np.array([centre_xy[0], centre_xy[1], (lo[2] + hi[2]) / 2]),
