@@ -39,8 +39,7 @@ class Band:
     """Each surface's band: ``width(surface, voxel)`` (K,) metres for surface components
     (K,) and the grid's voxels (K,) holding the points: ``sigmas`` noise sigmas at the
     voxels' range, at least ``floor``, for the components the band decides (``by_band``,
-    (C,)), at most the larger of ``tolerance`` and ``ceiling``; the growth's ``tolerance``
-    (C,) for the others."""
+    (C,)), at most ``tolerance``; the growth's ``tolerance`` (C,) for the others."""
 
     model: NoiseModel
     sigmas: float
@@ -48,7 +47,6 @@ class Band:
     r_voxel: np.ndarray | None  # (M,) range of each voxel's centre from the sensor, m
     by_band: np.ndarray
     tolerance: np.ndarray
-    ceiling: float = np.inf  # the band's widest, metres (half a voxel's height)
 
     def width(self, surface: np.ndarray, voxel: np.ndarray) -> np.ndarray:
         r = 0.0 if self.r_voxel is None else self.r_voxel[voxel]
@@ -75,8 +73,8 @@ def label_in_band(
     noise. Where the band decides (:func:`band_decides`: a depth camera's surfaces), the
     noise is measured again about planes refitted over each voxel's neighbours (which the
     voxels holding clutter keep), and the labels redone within ``params.band_sigmas`` sigma
-    at the range of each point's voxel, at least ``params.band_min``, at most the larger of
-    ``tolerance`` and half a voxel's height; elsewhere ``tolerance`` stays. ``planes`` may
+    at the range of each point's voxel, at least ``params.band_min``, at most ``tolerance``;
+    elsewhere ``tolerance`` stays. ``planes`` may
     change."""
     labels, best = _label_points_planar(grid, index, surface_of_voxel, planes, tolerance)
     if params.band_sigmas <= 0 or not (labels >= 0).any():
@@ -108,9 +106,7 @@ def label_in_band(
     take = np.union1d(_cluttered(grid, index, surface_of_voxel, labels), sv[off])
     planes.mean[take] = window.mean[take]
     planes.normal[take] = window.normal[take]
-    band = Band(
-        model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance, 0.5 * grid.size[2]
-    )
+    band = Band(model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance)
     labels, best = _label_points_planar(
         grid, index, surface_of_voxel, planes, tolerance, band.width
     )
