@@ -9,7 +9,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["fill_places", "kept_points"]
+__all__ = ["fill_places", "kept_points", "off_plane"]
 
 
 @njit(cache=True, nogil=True)
@@ -98,9 +98,59 @@ def kept_points(pts: np.ndarray, raw_n: np.ndarray) -> np.ndarray:
     return _kept(pts, raw_n)
 
 
+@njit(cache=True, nogil=True)
+def _off_plane(raw, slots, raw_n, normal, level, dist, most):
+    k = raw.shape[1]
+    for v in range(slots.size):
+        s = slots[v]
+        n0, n1, n2, e = normal[v, 0], normal[v, 1], normal[v, 2], level[v]
+        for j in range(k):
+            d = 0.0
+            if j < raw_n[s]:
+                # numpy's order: x n0, + y n1, + z n2, - level, in float64.
+                d = np.float64(raw[s, j, 0]) * n0
+                d = d + np.float64(raw[s, j, 1]) * n1
+                d = d + np.float64(raw[s, j, 2]) * n2
+                d = abs(d - e)
+            dist[v, j] = d
+            # np.maximum's: a NaN wins.
+            if j == 0 or d > most[v] or d != d:
+                most[v] = d
+
+
+def off_plane(
+    raw: np.ndarray, slots: np.ndarray, raw_n: np.ndarray, normal: np.ndarray, level: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """How far the kept points of the voxels at store ``slots`` (V,) lie off a plane each:
+    (V, K) metres, ``|raw . normal - level|`` (0 for a place not filled), and its largest
+    per voxel (V,). raw (S, K, 3) float32 offsets from the corners, raw_n (S,) int32 filled
+    places, normal (V, 3) float64, level (V,) float64 (the plane's ``p . normal`` in the same
+    corner frame). The numpy path's operations in its order: the same bits."""
+    if raw.ndim != 3 or raw.shape[2] != 3 or raw_n.shape != raw.shape[:1]:
+        raise ValueError(f"raw must be (S, K, 3) and raw_n (S,), got {raw.shape}, {raw_n.shape}")
+    slots = np.ascontiguousarray(slots, np.int64)
+    normal = np.ascontiguousarray(normal, np.float64)
+    level = np.ascontiguousarray(level, np.float64)
+    if normal.shape != (len(slots), 3) or level.shape != (len(slots),):
+        raise ValueError("normal must be (V, 3) and level (V,) for V slots")
+    if len(slots) and (slots.min() < 0 or slots.max() >= len(raw)):
+        raise ValueError("slots outside the store")
+    dist = np.empty((len(slots), raw.shape[1]))
+    most = np.zeros(len(slots))
+    _off_plane(raw, slots, raw_n, normal, level, dist, most)
+    return dist, most
+
+
 @warmer
 def _warm() -> None:
     kept_points(np.zeros((2, 4, 3)), np.array([1, 0], np.int32))
+    off_plane(
+        np.zeros((2, 4, 3), np.float32),
+        np.array([1]),
+        np.array([1, 2], np.int32),
+        np.ones((1, 3)),
+        np.zeros(1),
+    )
     raw = np.zeros((2, 4, 3), np.float32)
     col = np.array([0.01, 0.02, 0.03])
     fill_places(

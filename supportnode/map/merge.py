@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from supportnode.kernels.places import fill_places
+from supportnode.kernels.places import fill_places, off_plane
 from supportnode.map.clearing import March
 from supportnode.map.keys import pack_keys
 from supportnode.map.scan import ScanVoxelizer, _plane_fits, _plane_noise, _ScanGrid
@@ -112,8 +112,6 @@ class Merging(ScanVoxelizer):
         with kept points and >= 4 scan points) that this scan shows changed (see
         _keep_first); marks in ``need`` the voxels whose points that took; returns the grid
         with points by voxel."""
-        k = self.keep_points
-        n = self._raw_n[slots]
         moments = np.take(grid.moments, had, axis=0)
         count = grid.counts[had]
         seen, evals, normal, planar = _plane_fits(count, moments[:, :3], moments[:, 3:], self.size)
@@ -121,30 +119,19 @@ class Merging(ScanVoxelizer):
         # Most voxels are planes: the tests below run on all (each voxel's result is its
         # own), and only the end keeps the planes, rather than gathering them first.
         s = slots[had]
-        raw = self._raw[s]  # (V, k, 3) float32, relative to the corner like seen
-        # In float64 from the start (what mixing float32 into float64 products does anyway,
-        # once rather than per product), in place.
-        wide = raw.astype(np.float64)
-        dist = wide[:, :, 0] * normal[:, 0, None]
-        dist += wide[:, :, 1] * normal[:, 1, None]
-        dist += wide[:, :, 2] * normal[:, 2, None]
-        dist -= np.einsum("ij,ij->i", seen, normal)[:, None]
-        np.abs(dist, out=dist)
-        dist[np.arange(k)[None, :] >= n[had, None]] = 0.0  # places not filled yet
+        # |kept point . normal - mean . normal| per place (0: not filled), compiled.
+        dist, most = off_plane(
+            self._raw, s, self._raw_n, normal, np.einsum("ij,ij->i", seen, normal)
+        )
         noise = _plane_noise(evals[:, 0], count, planar)
         tol = np.maximum(0.2 * self.size, 3.5 * noise)
-        # Column by column: numpy reduces the short axis of a (V, k) array several times
-        # slower.
-        most = dist[:, 0].copy()
-        for j in range(1, k):  # keep_points columns
-            np.maximum(most, dist[:, j], out=most)
         off = np.flatnonzero(planar & (most > tol))
         # The candidates' rays come from the scan's points in them and their neighbours.
         pairs = self._neighbour_pairs(grid, packed, had[off])
         need[pairs[1]] = True
         grid = self._by_voxel(grid, need)
         seen_through = self._seen_through(
-            grid, had[off], pairs, raw[off], dist[off], origin, 3.0 * noise[off]
+            grid, had[off], pairs, self._raw[s[off]], dist[off], origin, 3.0 * noise[off]
         )
         renew = s[off[seen_through]]
         self._raw_n[renew] = 0

@@ -219,17 +219,22 @@ def regional_from(
 
 
 def _inside(boxes: list, lo: np.ndarray, hi: np.ndarray, margin: float) -> tuple:
-    """The region closed over the items' boxes: (inside mask, lo, hi)."""
-    inside = np.zeros(len(boxes), bool)
-    grew = True
-    while grew:  # closure: a few rounds, each a loop over the (tens of) items
-        grew = False
-        for i, (blo, bhi) in enumerate(boxes):
-            if not inside[i] and _meets(lo, hi, blo, bhi, margin):
-                inside[i] = True
-                lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
-                grew = True
-    return inside, lo, hi
+    """The region closed over the items' boxes: (inside mask, lo, hi). The closure is the
+    smallest box holding the region and every box that meets it grown by ``margin``: unique,
+    so each round takes every box that meets the region at once."""
+    n = len(boxes)
+    inside = np.zeros(n, bool)
+    if n == 0:
+        return inside, lo, hi
+    blo = np.array([b[0] for b in boxes], float).reshape(n, 2)
+    bhi = np.array([b[1] for b in boxes], float).reshape(n, 2)
+    while True:  # closure: a few rounds
+        meets = ~inside & (blo <= hi + margin).all(axis=1) & (bhi >= lo - margin).all(axis=1)
+        if not meets.any():
+            return inside, lo, hi
+        inside |= meets
+        lo = np.minimum(lo, blo[meets].min(axis=0))
+        hi = np.maximum(hi, bhi[meets].max(axis=0))
 
 
 def _kept(items: list, lo: np.ndarray, hi: np.ndarray, margin: float) -> list[int] | None:

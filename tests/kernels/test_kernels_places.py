@@ -78,3 +78,52 @@ def test_kept_points_bad_input():
         kept_points(np.zeros((2, 2, 3)), np.array([0, 3], np.int32))
     with pytest.raises(ValueError, match="must be"):
         kept_points(np.zeros((2, 2)), np.array([0, 1], np.int32))
+
+
+def _off_plane_numpy(raw, slots, raw_n, normal, level):
+    """The renewal test's distances as the map computed them in numpy."""
+    k = raw.shape[1]
+    wide = raw[slots].astype(np.float64)
+    dist = wide[:, :, 0] * normal[:, 0, None]
+    dist += wide[:, :, 1] * normal[:, 1, None]
+    dist += wide[:, :, 2] * normal[:, 2, None]
+    dist -= level[:, None]
+    np.abs(dist, out=dist)
+    dist[np.arange(k)[None, :] >= raw_n[slots, None]] = 0.0
+    most = dist[:, 0].copy() if len(slots) else np.zeros(0)
+    for j in range(1, k):
+        np.maximum(most, dist[:, j], out=most)
+    return dist, most
+
+
+@settings(max_examples=80, deadline=None)
+@given(s=st.integers(1, 60), v=st.integers(0, 60), k=st.integers(1, 6), seed=st.integers(0, 9999))
+def test_off_plane_matches_the_numpy_path(s, v, k, seed):
+    from supportnode.kernels.places import off_plane
+
+    rng = np.random.default_rng(seed)
+    raw = rng.uniform(0, 0.05, (s, k, 3)).astype(np.float32)
+    raw_n = rng.integers(0, k + 1, s).astype(np.int32)
+    slots = rng.integers(0, s, v)
+    normal = rng.normal(size=(v, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    level = rng.uniform(-0.05, 0.05, v)
+    if v and seed % 7 == 0:
+        normal[0] = np.nan  # a NaN plane: np.maximum's NaN propagates
+    got = off_plane(raw, slots, raw_n, normal, level)
+    want = _off_plane_numpy(raw, slots, raw_n, normal, level)
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape and np.array_equal(g, w, equal_nan=True)
+
+
+def test_off_plane_bad_input():
+    from supportnode.kernels.places import off_plane
+
+    raw = np.zeros((2, 3, 3), np.float32)
+    n32 = np.zeros(2, np.int32)
+    with pytest.raises(ValueError, match="slots outside"):
+        off_plane(raw, np.array([2]), n32, np.ones((1, 3)), np.zeros(1))
+    with pytest.raises(ValueError, match="normal must be"):
+        off_plane(raw, np.array([1]), n32, np.ones((2, 3)), np.zeros(1))
+    with pytest.raises(ValueError, match="raw must be"):
+        off_plane(raw[:, :, :2], np.array([1]), n32, np.ones((1, 3)), np.zeros(1))

@@ -67,3 +67,38 @@ def test_incremental_equals_full_recompute_scan_by_scan(rng, kind):
     # The shortcuts really ran somewhere in these sequences (else the test proves nothing).
     shortcuts = sum(o.incremental or o.reused for o in outs[True])
     assert shortcuts >= 1, [(o.incremental, o.reused) for o in outs[True]]
+
+
+def _inside_one_by_one(boxes, lo, hi, margin):
+    """The region's closure as first written: box by box, the region grown at each."""
+    inside = np.zeros(len(boxes), bool)
+    grew = True
+    while grew:
+        grew = False
+        for i, (blo, bhi) in enumerate(boxes):
+            meets = np.all(blo <= hi + margin) and np.all(bhi >= lo - margin)
+            if not inside[i] and meets:
+                inside[i] = True
+                lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
+                grew = True
+    return inside, lo, hi
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_region_closure_equals_growing_box_by_box(seed):
+    """The closure over the items' boxes is unique: all boxes at once per round give the
+    same boxes and region as one box at a time (chains of boxes reached in several rounds)."""
+    from supportnode.node.incremental import _inside
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(0, 40))
+    lo_b = rng.uniform(-5, 5, (n, 2))
+    boxes = [(b, b + rng.uniform(0.05, 1.5, 2)) for b in lo_b]
+    lo = rng.uniform(-1, 0, 2)
+    hi = lo + rng.uniform(0, 1, 2)
+    got = _inside(boxes, lo, hi, 0.5)
+    want = _inside_one_by_one(boxes, lo, hi, 0.5)
+    assert np.array_equal(got[0], want[0])
+    assert np.array_equal(got[1], want[1]) and np.array_equal(got[2], want[2])
+    if n and seed == 0:
+        assert 0 < got[0].sum()  # the case is not vacuous
