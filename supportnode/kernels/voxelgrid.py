@@ -87,7 +87,7 @@ def _pairwise(a, b, start, n, product):
 
 @njit(cache=True, nogil=True)
 def _sort_points(pts, size, origin, dims, top):
-    """Each point's voxel rank, the voxels' linear keys and counts, the points' order (a
+    """Each point's voxel rank, the voxels' keys (V, 3) and counts, the points' order (a
     stable counting sort by voxel) and their offsets from the corner, in that order."""
     n = pts.shape[0]
     lin = np.empty(n, np.int64)
@@ -101,17 +101,27 @@ def _sort_points(pts, size, origin, dims, top):
     nv = 0
     for k in range(top + 1):
         nv += rank[k] > 0
-    lin_of_voxel = np.empty(nv, np.int64)
+    keys = np.empty((nv, 3), np.int64)
     counts = np.empty(nv, np.int64)
     starts = np.empty(nv, np.int64)
     v = 0
     at = 0
-    for k in range(top + 1):  # counts become ranks: ascending keys
-        if rank[k] > 0:
-            lin_of_voxel[v], counts[v], starts[v] = k, rank[k], at
-            at += rank[k]
-            rank[k] = v
-            v += 1
+    k = 0
+    # Counts become ranks: ascending keys, each voxel's key from the loop's indices (numpy's
+    # integer division of the linear keys cost as much as this whole pass).
+    for i0 in range(dims[0]):
+        for i1 in range(dims[1]):
+            for i2 in range(dims[2]):
+                c = rank[k]
+                if c > 0:
+                    keys[v, 0] = i0 + origin[0]
+                    keys[v, 1] = i1 + origin[1]
+                    keys[v, 2] = i2 + origin[2]
+                    counts[v], starts[v] = c, at
+                    at += c
+                    rank[k] = v
+                    v += 1
+                k += 1
     fill = np.empty(nv, np.int64)
     for v in range(nv):  # loops, not slice copies: those compile for seconds
         fill[v] = starts[v]
@@ -128,7 +138,7 @@ def _sort_points(pts, size, origin, dims, top):
         order[j] = i
         for a in range(3):
             srt[a, j] = pts[i, a] - np.floor(pts[i, a] / size[a]) * size[a]
-    return lin_of_voxel, counts, starts, order, point_voxel, srt
+    return keys, counts, starts, order, point_voxel, srt
 
 
 @njit(cache=True, nogil=True)
@@ -215,7 +225,7 @@ def voxel_grid(
 ) -> tuple[np.ndarray, ...]:
     """The voxels of (N, 3) float64 points (finite, metres) of edge ``size`` (3,), whose
     keys less ``origin`` (3,) int64 lie in a box of ``dims`` (3,) int64 keys (at most a few
-    million: one counter each): linear keys (V,) int64 ascending, counts (V,), starts (V,),
+    million: one counter each): keys (V, 3) int64 ascending (x slowest), counts (V,), starts (V,),
     the points' order (N,) (by voxel, stable), each point's voxel (N,), the sorted offsets from
     the corner (3, N) float64, sums (V, 3) and outer products (V, 6) (``OUTER_INDEX``), all as
     `geometry.voxels.voxelize` computes them."""
@@ -223,9 +233,9 @@ def voxel_grid(
     origin = np.ascontiguousarray(origin, np.int64)
     dims = np.ascontiguousarray(dims, np.int64)
     top = int(np.prod(dims)) - 1
-    lin, counts, starts, order, voxel, srt = _sort_points(pts, size, origin, dims, top)
+    keys, counts, starts, order, voxel, srt = _sort_points(pts, size, origin, dims, top)
     sums, outer = _moments(srt, starts, counts, _PAIRS)
-    return lin, counts, starts, order, voxel, srt, sums, outer
+    return keys, counts, starts, order, voxel, srt, sums, outer
 
 
 @warmer
