@@ -255,7 +255,9 @@ def voxelize(points: np.ndarray, size: np.ndarray | tuple[float, float, float]) 
     top = int(np.prod(dims)) - 1
     if top >= max(8 * n, 1 << 20):
         return _voxelize_numpy(pts, size)
-    vkeys, counts, starts, order, point_voxel, srt, sums, outer = voxel_grid(pts, size, origin, dims)
+    vkeys, counts, starts, order, point_voxel, srt, sums, outer = voxel_grid(
+        pts, size, origin, dims
+    )
     return VoxelGrid(size, vkeys, counts, point_voxel, sums, outer, order, starts, list(srt))
 
 

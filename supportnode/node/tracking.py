@@ -18,6 +18,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from supportnode.errors import InputError
+from supportnode.kernels.overlap import shared_cells
 
 # Cell coordinates are packed around an offset of 2^30 (|ix|, |iy| < 2^30 cells: 21,000 km
 # at 2 cm) into 31 + 32 bits, so packed keys sort like (ix, iy) and never overflow int64.
@@ -193,24 +194,15 @@ def overlap_matrix(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
     """Intersection-over-union of footprints: (len(a), len(b)) float64.
 
     a, b: lists of packed cell arrays (:func:`pack_cells`). Vectorised over all cells: one
-    sort of the cells of ``b`` and a search of those of ``a``, no loop over pairs."""
+    sort of the cells of ``b`` and a search of those of ``a`` (`kernels.overlap`), no loop
+    over pairs."""
     na, nb = len(a), len(b)
     iou = np.zeros((na, nb))
     if na == 0 or nb == 0:
         return iou
     size_a = np.array([len(x) for x in a])
     size_b = np.array([len(x) for x in b])
-    ca, la = np.concatenate(a), np.repeat(np.arange(na), size_a)
-    cb, lb = np.concatenate(b), np.repeat(np.arange(nb), size_b)
-    order = np.argsort(cb, kind="stable")
-    cb, lb = cb[order], lb[order]
-    # A cell can belong to several footprints of b (stacked shelf boards): expand ranges.
-    start = np.searchsorted(cb, ca, side="left")
-    stop = np.searchsorted(cb, ca, side="right")
-    n = stop - start
-    rows = np.repeat(la, n)
-    idx = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n) + np.repeat(start, n)
-    inter = np.bincount(rows * nb + lb[idx], minlength=na * nb).reshape(na, nb).astype(float)
+    inter = shared_cells(a, b).astype(float)
     union = size_a[:, None] + size_b[None, :] - inter
     np.divide(inter, union, out=iou, where=union > 0)
     return iou
