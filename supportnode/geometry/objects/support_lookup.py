@@ -233,7 +233,11 @@ def _supports(
         near = np.flatnonzero((-tol <= gap) & (gap <= tol))
         if len(near) == 0:
             continue
-        rows = np.concatenate([np.arange(starts[c], starts[c] + n_low[c]) for c in near])
+        # The low rows of the near clusters, cluster by cluster: their ranges concatenated.
+        take_n = n_low[near]
+        rows = np.arange(int(take_n.sum())) + np.repeat(
+            starts[near] - (np.cumsum(take_n) - take_n), take_n
+        )
         hits = lk.over_cells(cells.of(lk.cell), rows)
         count = np.bincount(owner[rows], weights=hits, minlength=n)[near]
         frac = count / n_low[near]  # the mean of the booleans, exactly
