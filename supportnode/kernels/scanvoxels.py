@@ -49,8 +49,8 @@ def _scan_voxels(x, y, z, size, lo, dims, pairs, mark, rank, lin, local):
     o0, o1, o2 = np.int64(lo[0]), np.int64(lo[1]), np.int64(lo[2])
     v = 0
     k = 0
-    # Ascending keys, each from the loop's indices (numpy's integer division of the linear
-    # keys cost a third of this kernel); the table is left all False again.
+    # Ascending keys, each from the loop's indices (no division of the linear keys
+    # afterwards); the table is left all False again.
     for i0 in range(d0):
         if v == nvox:
             break

@@ -107,8 +107,8 @@ def _sort_points(pts, size, origin, dims, top):
     v = 0
     at = 0
     k = 0
-    # Counts become ranks: ascending keys, each voxel's key from the loop's indices (numpy's
-    # integer division of the linear keys cost as much as this whole pass).
+    # Counts become ranks: ascending keys, each voxel's key from the loop's indices (no
+    # division of the linear keys afterwards).
     for i0 in range(dims[0]):
         for i1 in range(dims[1]):
             for i2 in range(dims[2]):
