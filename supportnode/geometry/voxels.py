@@ -57,14 +57,6 @@ def _argsort_runs(keys: np.ndarray, top: int) -> np.ndarray:
     return np.repeat(shift, length) + np.arange(n)
 
 
-def voxel_keys(points: np.ndarray, size: np.ndarray) -> np.ndarray:
-    """Integer voxel coordinates floor(p / size): (N, 3) float -> (N, 3) int64."""
-    keys = np.floor(np.asarray(points, dtype=np.float64) / size)
-    if keys.size and (np.abs(keys).max() >= 2**40):
-        raise InputError("points too far from the origin for this voxel size (|key| >= 2^40)")
-    return keys.astype(np.int64)
-
-
 @dataclass
 class KeyIndex:
     """Sorted linear keys of a set of voxels, for vectorised lookup of (neighbour) keys."""
