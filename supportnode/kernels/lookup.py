@@ -12,7 +12,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["cluster_bottoms", "table_lookup"]
+__all__ = ["cluster_bottoms", "lowest_per_cell", "table_lookup"]
 
 
 @njit(cache=True, nogil=True)
@@ -50,6 +50,31 @@ def table_lookup(
     cell = np.ascontiguousarray(cell, np.float64).reshape(2)
     origin = np.ascontiguousarray(origin, np.int64).reshape(2)
     return _lookup(np.ascontiguousarray(cp, np.float64), threshold, cell, origin, best)
+
+
+@njit(cache=True, nogil=True)
+def _lowest(cp, cell, origin, h, w):
+    low = np.full((h, w), np.inf)
+    for p in range(cp.shape[0]):
+        i = np.int64(math.floor(cp[p, 0] / cell[0])) - origin[0]
+        j = np.int64(math.floor(cp[p, 1] / cell[1])) - origin[1]
+        if 0 <= i < h and 0 <= j < w and cp[p, 2] < low[i, j]:
+            low[i, j] = cp[p, 2]
+    return low
+
+
+def lowest_per_cell(
+    cp: np.ndarray, cell: np.ndarray, origin: np.ndarray, shape: tuple[int, int]
+) -> np.ndarray:
+    """(H, W) float64 lowest z (m) of the points of cp (M, 3) float64 (finite, m) in each cell
+    ``floor(xy / cell) - origin`` of an H x W raster (``shape``); inf where none lies. One
+    pass, where ``np.minimum.at`` took ~5 ms on the 400k candidates of a merged lidar map."""
+    h, w = (int(v) for v in shape)
+    if h < 0 or w < 0:
+        raise ValueError(f"shape must not be negative, got {shape}")
+    cell = np.ascontiguousarray(cell, np.float64).reshape(2)
+    origin = np.ascontiguousarray(origin, np.int64).reshape(2)
+    return _lowest(np.ascontiguousarray(cp, np.float64).reshape(-1, 3), cell, origin, h, w)
 
 
 @njit(cache=True, nogil=True)
@@ -156,3 +181,4 @@ def _warm() -> None:
     best[1, 0, 0] = 0
     cp = np.array([[0.01, 0.01, 0.5], [0.5, 0.5, 0.0]])
     table_lookup(cp, np.array([0.2]), np.array([0.1, 0.1]), np.zeros(2, np.int64), best)
+    lowest_per_cell(cp, np.array([0.1, 0.1]), np.zeros(2, np.int64), (2, 2))

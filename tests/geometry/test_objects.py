@@ -287,6 +287,36 @@ def test_chair_leg_stands_on_floor_not_table(with_floor):
         assert leg.height == pytest.approx(0.88)  # above its own bottom
 
 
+def test_object_over_a_notch_at_the_edge_stands_on_the_table_whole():
+    """A sparse lidar view leaves a notch in the table's footprint (the box's own shadow, the
+    gaps between rings) that reaches the table's edge; the box's front lies over it. The box
+    stands on the table as one object, not cut where the footprint ends."""
+    table = make_surface(0, TABLE_Z, 0.0, 1.0, 0.0, 1.0)
+    notch = (table.cells[:, 0] >= 8) & (table.cells[:, 1] >= 4) & (table.cells[:, 1] < 6)
+    table.cells = table.cells[~notch]  # x 0.8-1.0, y 0.4-0.6: open to the edge x = 1
+    floor = make_surface(1, 0.0, -1.0, 2.0, -1.0, 2.0)  # under the table too
+    b = box((0.72, 0.42, TABLE_Z), (0.86, 0.58, TABLE_Z + 0.12))
+    res = detect_objects(b, SurfaceResult([table, floor], np.full(len(b), -1, np.int32)))
+    assert [c.point_count for c in res.clusters] == [len(b)]
+    assert res.clusters[0].surface_id == 0
+
+
+def test_objects_along_an_edge_do_not_join_through_the_table_rim():
+    """The table's side face, just below its top and beyond its footprint, touches both boxes
+    standing at the edge; it stands on nothing, so it links neither to the other."""
+    table = make_surface(0, TABLE_Z, 0.0, 1.0, 0.0, 1.0)
+    a = box((0.86, 0.2, TABLE_Z), (0.995, 0.3, TABLE_Z + 0.1))
+    b = box((0.86, 0.6, TABLE_Z), (0.995, 0.7, TABLE_Z + 0.1))
+    gy, gz = np.meshgrid(np.arange(0.0, 1.0, 0.01), np.arange(TABLE_Z - 0.04, TABLE_Z - 1e-3, 0.01))
+    rim = np.c_[np.full(gy.size, 1.002), gy.ravel(), gz.ravel()]
+    pts = np.concatenate([a, b, rim])
+    res = detect_objects(pts, SurfaceResult([table], np.full(len(pts), -1, np.int32)))
+    of_a, of_b = res.labels[: len(a)], res.labels[len(a) : len(a) + len(b)]
+    assert len(set(of_a)) == len(set(of_b)) == 1 and of_a[0] != of_b[0]
+    assert of_a[0] >= 0 and of_b[0] >= 0
+    assert [res.clusters[k].surface_id for k in (of_a[0], of_b[0])] == [0, 0]
+
+
 def test_object_in_footprint_hole_stands_on_table():
     """Cells under an object hold no table points; the table is still what it stands on."""
     table = make_surface(0, 0.5, 0, 1, 0, 1)
@@ -445,10 +475,20 @@ def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPa
     cp = np.c_[rng.uniform(-1.2, 1.2, (20000, 2)), rng.uniform(-0.1, 1.5, 20000)]
     fast = support_lookup._support_below(cp, surfaces, 0.05)
     with monkeypatch.context() as m:
-        m.setattr(
-            support_lookup._SupportTable, "build", classmethod(lambda cls, lookups, tol: None)
-        )
+        m.setattr(support_lookup._SupportTable, "build", classmethod(lambda cls, *args: None))
         np.testing.assert_array_equal(fast, support_lookup._support_below(cp, surfaces, 0.05))
+        # No floor, nothing below 0.35 but one point far off (so surface 1 is no ground):
+        # surface 1's ring (nothing there comes up from below its height - tol) holds
+        # points, surface 2's does not.
+        high = np.r_[cp[cp[:, 2] >= 0.35], [[-1.15, -1.15, 0.0]]]
+        slow = support_lookup._support_below(high, surfaces[1:], 0.05)
+    one = support_lookup._support_below(high, surfaces[1:], 0.05)
+    np.testing.assert_array_equal(one, slow)
+    x, y, z = high.T
+    ring1 = (x >= 0.3) & (x < 0.4) & (y >= -0.1) & (y < 0.1)  # on no other footprint
+    assert (one[ring1 & (z >= 0.4)] == 1).all() and (one[ring1 & (z < 0.4)] == -1).all()
+    ring2 = (x >= 0.6) & (x < 0.7) & (y >= 0.1) & (y < 0.5)
+    assert (one[ring2] == -1).all()
     dense = clusters._cluster_voxel(cp * 0.3, 0.03, {}, fast)
     monkeypatch.setattr(clusters, "_DENSE_MIN_CELLS", 0)
     monkeypatch.setattr(clusters, "_DENSE_CELLS_PER_POINT", 0)

@@ -109,3 +109,40 @@ def test_cluster_bottoms_bad_input():
         cluster_bottoms(np.zeros(4), np.array([[0, 5]]), 0.01)
     with pytest.raises(ValueError, match="low percentile"):
         cluster_bottoms(np.zeros(4), np.array([[0, 4]]), 0.01, q=60.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    m=st.integers(0, 300),
+    shape=st.tuples(st.integers(0, 12), st.integers(0, 12)),
+    seed=st.integers(0, 10_000),
+)
+def test_lowest_per_cell_matches_numpy(m, shape, seed):
+    from supportnode.kernels.lookup import lowest_per_cell
+
+    rng = np.random.default_rng(seed)
+    cell = rng.uniform(0.02, 0.2, 2)
+    origin = rng.integers(-5, 5, 2)
+    # Points inside and around the raster, on cell edges too.
+    cp = np.column_stack(
+        [
+            (origin + rng.integers(-2, np.array(shape) + 2, (m, 2)) + rng.choice([0, 0.5], (m, 2)))
+            * cell,
+            np.round(rng.normal(0.5, 0.3, m), 2),
+        ]
+    )
+    want = np.full(shape, np.inf)
+    i = np.floor(cp[:, 0] / cell[0]).astype(np.int64) - origin[0]
+    j = np.floor(cp[:, 1] / cell[1]).astype(np.int64) - origin[1]
+    inside = (i >= 0) & (i < shape[0]) & (j >= 0) & (j < shape[1])
+    np.minimum.at(want, (i[inside], j[inside]), cp[inside, 2])
+    got = lowest_per_cell(cp, cell, origin, shape)
+    assert got.shape == tuple(shape)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_lowest_per_cell_bad_shape():
+    from supportnode.kernels.lookup import lowest_per_cell
+
+    with pytest.raises(ValueError, match="negative"):
+        lowest_per_cell(np.zeros((1, 3)), np.ones(2), np.zeros(2), (-1, 2))

@@ -11,6 +11,7 @@ footprint cells and it is at most ``tol`` below the surface's height.
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +19,7 @@ from scipy import ndimage
 
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.footprint import fill_holes
-from supportnode.kernels.lookup import cluster_bottoms, table_lookup
+from supportnode.kernels.lookup import cluster_bottoms, lowest_per_cell, table_lookup
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
 _BOTTOM_BAND = 0.02
@@ -44,12 +45,13 @@ def _support_below(
     """(M,) int64: the highest surface under each point of cp (M, 3), -1 when none.
 
     A point is over a surface when its x, y falls on the surface's (filled) footprint and it is
-    no more than ``tol`` below the surface's height. lookups: the surfaces' lookups undilated
-    and dilated (see _lookups), built here when None.
+    no more than ``tol`` below the surface's height; or when it falls on the one-cell ring
+    around that footprint, off the footprints of the surfaces as high or higher, at or above
+    the height, in a cell whose points all lie above ``height - tol``. lookups: the
+    surfaces' lookups undilated and dilated (see _lookups), built here when None.
     """
     plain, dilated = lookups if lookups is not None else _lookups(surfaces)
     by_id = {s.id: k for k, s in enumerate(surfaces)}
-    sup = np.full(len(cp), -1, dtype=np.int64)
     ordered = sorted(surfaces, key=lambda s: s.height)
     # The ground (lowest surface with nothing below it) is dilated: a wall standing on its
     # ragged edge would otherwise alternate between "over the floor" and "over nothing" and
@@ -59,55 +61,131 @@ def _support_below(
     )
     # Undilated: a chair back rising just beside a table must not be cut at table height.
     lks = [(dilated if s is ground else plain)[by_id[s.id]] for s in ordered]
-    table = _SupportTable.build(lks, tol)
+    # The ring one cell around a footprint holds what rises from the surface's height: an
+    # object at a sparse scan's ragged table edge, its front over a notch its own shadow or
+    # the gap between two rings left, or a microwave at the back of a counter, the counter
+    # under it hidden by its front, stands on the surface as a whole (cut where the
+    # footprint ends, it fell in two). Not the surface's own rim (its side face, below its
+    # top: that would link the objects along the edge), nor a chair's leg beside a table,
+    # which comes up from below in its cell. A depth camera's surface has its notches closed
+    # already (see _SupportLookup), and its band claims the foot of what the ring would add.
+    rings = [
+        (k, dilated[by_id[s.id]])
+        for k, s in enumerate(ordered)
+        if s is not ground and s.band[0] <= 0
+    ]
+    table = _SupportTable.build(lks, tol, rings, cp)
     if table is not None:
         return table.lookup(cp)
+    return _support_by_layers(cp, lks, tol, rings)
+
+
+def _support_by_layers(
+    cp: np.ndarray,
+    lks: list[_SupportLookup],
+    tol: float,
+    rings: Sequence[tuple[int, _SupportLookup]],
+) -> np.ndarray:
+    """:func:`_support_below` layer by layer (the footprints' grids differ, or the one raster
+    would be too large): the same layers, in the same order, as :class:`_SupportTable`."""
+    sup = np.full(len(cp), -1, dtype=np.int64)
     cells = _CellIndex(cp[:, :2])  # floor(xy / cell) once per cell size, not once per surface
     z = cp[:, 2]
-    for lk in lks:  # higher surfaces overwrite lower ones
-        idx = np.flatnonzero(z >= lk.height - tol)
-        sup[idx[lk.over_cells(cells.of(lk.cell), idx)]] = lk.id
+    over = [lk.over_cells(cells.of(lk.cell)) for lk in lks]
+    writes = [(lk.height - tol, lk.id, over[k]) for k, lk in enumerate(lks)]
+    for k, ring in rings:
+        ij = cells.of(ring.cell)
+        on = ring.over_cells(ij) & ~_shadowing(over, lks, k)
+        rows = np.flatnonzero(on)
+        low = lowest_per_cell(np.take(cp, rows, axis=0), ring.cell, ring.origin, ring.mask.shape)
+        i, j = ij[rows, 0] - ring.origin[0], ij[rows, 1] - ring.origin[1]
+        on[rows] = low[i, j] >= ring.height - tol
+        writes.append((ring.height, ring.id, on))
+    # Stable: footprints before rings on ties, lower surfaces first.
+    for w in np.argsort([t for t, _, _ in writes], kind="stable").tolist():
+        threshold, sid, hit = writes[w]
+        sup[hit & (z >= threshold)] = sid
     return sup
+
+
+def _shadowing(masks: list[np.ndarray], lks: list[_SupportLookup], k: int) -> np.ndarray:
+    """Where surface k's ring gives way: the union of masks (of points or of cells) of its
+    own footprint and of every other surface as high as it or higher (lks sorted by
+    height)."""
+    out = masks[k].copy()
+    for k2, lk in enumerate(lks):
+        if k2 != k and lk.height >= lks[k].height:
+            out |= masks[k2]
+    return out
 
 
 @dataclass
 class _SupportTable:
     """All surfaces' footprints on one raster, for :func:`_support_below` in one pass.
 
-    ``best[k, i, j]``: id of the highest of the first k surfaces (by height) whose footprint
-    covers cell (i, j), -1 for none. A point at height z is over exactly the surfaces whose
-    ``height - tol`` is at most z, a prefix of k of them, so its support is one look-up; the
-    same answer as overwriting the support surface by surface in height order.
+    ``best[k, i, j]``: id of the surface of the last of the first k layers (by threshold)
+    that covers cell (i, j), -1 for none; a layer is a surface's footprint from ``height -
+    tol`` up, or its ring (see :func:`_support_below`) from ``height`` up. A point at height
+    z is over exactly the layers whose threshold is at most z, a prefix of k of them, so its
+    support is one look-up; the same answer as overwriting the support layer by layer.
     """
 
     cell: np.ndarray  # (2,) m, shared by all surfaces
     origin: np.ndarray  # (2,) int64 cell index of best[:, 0, 0]
-    best: np.ndarray  # (S + 1, H, W) int32
-    threshold: np.ndarray  # (S,) ascending height - tol, m
+    best: np.ndarray  # (L + 1, H, W) int32
+    threshold: np.ndarray  # (L,) ascending, m
 
     @classmethod
-    def build(cls, lookups: list[_SupportLookup], tol: float) -> _SupportTable | None:
-        """From lookups sorted by height; None when their grids differ or the raster would
-        exceed _TABLE_MAX_CELLS (then surfaces are tested one by one)."""
-        if not lookups or len({(float(lk.cell[0]), float(lk.cell[1])) for lk in lookups}) != 1:
+    def build(
+        cls,
+        lookups: list[_SupportLookup],
+        tol: float,
+        rings: Sequence[tuple[int, _SupportLookup]] = (),
+        cp: np.ndarray | None = None,
+    ) -> _SupportTable | None:
+        """From lookups sorted by height (each over its footprint from ``height - tol`` up)
+        and ``rings`` (k, the dilated lookup of lookups[k]), each over its cells off
+        :func:`_shadowing`'s where no point of cp (M, 3) lies below ``height - tol``, from
+        ``height`` up; None when their grids differ or the raster would exceed
+        _TABLE_MAX_CELLS (then :func:`_support_by_layers`)."""
+        every = [*lookups, *(ring for _, ring in rings)]
+        if not lookups or len({(float(lk.cell[0]), float(lk.cell[1])) for lk in every}) != 1:
             return None
-        used = [lk for lk in lookups if lk.mask.any()]  # an empty footprint covers no cell
+        used = [lk for lk in every if lk.mask.any()]  # an empty footprint covers no cell
         if not used:
             return None
         lo = np.min([lk.origin for lk in used], axis=0)
         hi = np.max([lk.origin + lk.mask.shape for lk in used], axis=0)
         h, w = (int(v) for v in hi - lo)
-        if (len(lookups) + 1) * h * w > _TABLE_MAX_CELLS:
+        layers = len(lookups) + len(rings)
+        if (layers + 1) * h * w > _TABLE_MAX_CELLS:
             return None
-        best = np.full((len(lookups) + 1, h, w), -1, dtype=np.int32)
-        for k, lk in enumerate(lookups):  # one raster per surface
+
+        def placed(lk: _SupportLookup) -> np.ndarray:
+            out = np.zeros((h, w), dtype=bool)
+            i0, j0 = (int(v) for v in lk.origin - lo)
+            out[i0 : i0 + lk.mask.shape[0], j0 : j0 + lk.mask.shape[1]] = lk.mask
+            return out
+
+        masks = [placed(lk) for lk in lookups]
+        if rings:
+            pts = np.zeros((0, 3)) if cp is None else cp
+            low = lowest_per_cell(pts, lookups[0].cell, lo, (h, w))
+            plain = list(masks)
+            for k, ring in rings:
+                masks.append(placed(ring) & ~_shadowing(plain, lookups, k))
+                masks[-1] &= low >= ring.height - tol
+        # Stable: footprints before rings on ties, lower surfaces first.
+        threshold = np.array(
+            [lk.height - tol for lk in lookups] + [ring.height for _, ring in rings]
+        )
+        order = np.argsort(threshold, kind="stable")
+        ids = [lk.id for lk in every]
+        best = np.full((layers + 1, h, w), -1, dtype=np.int32)
+        for k, q in enumerate(order.tolist()):  # one raster per layer
             best[k + 1] = best[k]
-            if lk.mask.any():
-                i0, j0 = (int(v) for v in lk.origin - lo)
-                region = best[k + 1, i0 : i0 + lk.mask.shape[0], j0 : j0 + lk.mask.shape[1]]
-                region[lk.mask] = lk.id
-        threshold = np.array([lk.height - tol for lk in lookups])
-        return cls(lookups[0].cell, lo, best, threshold)
+            best[k + 1][masks[q]] = ids[q]
+        return cls(lookups[0].cell, lo, best, threshold[order])
 
     def lookup(self, cp: np.ndarray) -> np.ndarray:
         """(M,) int64 support surface id of each point of cp (M, 3), -1 for none (compiled:
