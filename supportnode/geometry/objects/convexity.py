@@ -208,6 +208,7 @@ def cluster_convex(
     level = cell_levels(cp, comp, voxel, params)
     dense = level < len(CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
+    stats["_sparse_point"] = ~dense[comp]  # left whole: for layers.cut_layers
     if not dense.any():
         return comp  # its labels 0..C-1 are all used
     out = np.where(dense[comp], -1, comp)

@@ -29,6 +29,7 @@ from supportnode.geometry.objects.clusters import (
 from supportnode.geometry.objects.convexity import CELL_STEPS, cell_levels, cluster_convex
 from supportnode.geometry.objects.describe import _describe, _stack
 from supportnode.geometry.objects.feet import claim_feet, claim_raised
+from supportnode.geometry.objects.layers import cut_layers
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -118,6 +119,7 @@ def cluster_objects(
             f"unknown object method {params.method!r}; expected 'knn', 'voxel' or 'convex'"
         )
     voxels = stats.pop("_voxel_of_point", None)
+    sparse = stats.pop("_sparse_point", None)
     lab = _drop_small(lab, params.min_points)
     claimed = np.zeros(0, np.int64)
     if params.foot_reach > 0 and any(s.band[0] > 0 for s in surfaces.surfaces) and len(lab):
@@ -125,6 +127,8 @@ def cluster_objects(
             support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         cand, cp, lab, claimed = _claim_feet(pts, surfaces, cand, cp, lab, support, params)
         stats["foot_points"] = len(claimed)
+        if sparse is not None:  # the feet belong to dense (segmented) objects
+            sparse = np.r_[sparse, np.zeros(len(cp) - len(sparse), bool)]
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
     seg = _order(cp, lab, lookups[1], params)
     # Each component's surface by its label, for split_objects: a component that is not
@@ -140,7 +144,9 @@ def cluster_objects(
     if params.method != "voxel" or len(claimed):
         voxels = None
     origin = None if sensor_origin is None else np.asarray(sensor_origin, np.float64)
-    return Components(seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels, origin)
+    return Components(
+        seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels, origin, sparse
+    )
 
 
 def convex_components(
@@ -162,7 +168,8 @@ def convex_components(
     if (level < len(CELL_STEPS)).any():
         return cluster_objects(points, surfaces, params, sensor_origin)
     stats = dict(components._stats, method="convex", dense_components=0)
-    return dataclasses.replace(components, _stats=stats)
+    sparse = np.ones(len(components._points), bool)
+    return dataclasses.replace(components, _stats=stats, _sparse=sparse)
 
 
 # The band points searched for feet lie within this of the objects' x, y box, metres.
@@ -235,12 +242,16 @@ def split_objects(
     stats["split_parts"] = 0
     stats["step_splits"] = 0  # of which cut at a step of the top height
     stats["concave_splits"] = 0  # of which cut along concave creases
+    stats["layer_splits"] = 0  # sparse clusters cut where one stands on another's top
     known = components._supports
     split = lab
     if params.split_touching and len(lab):
-        split = _split_touching(cp, lab, params, stats, memo, components._origin)
+        groups = None
+        if components._sparse is not None:
+            split, groups = cut_layers(cp, split, components._sparse, known, params, stats)
+        split = _split_touching(cp, split, params, stats, memo, components._origin, groups)
     t2 = time.perf_counter()
-    if stats["merged_splits"] == 0:
+    if stats["merged_splits"] == 0 and stats["layer_splits"] == 0:
         # Nothing split (the usual case): the clusters are the components, in their order.
         seg = dataclasses.replace(components.segmentation, stats=stats)
     else:

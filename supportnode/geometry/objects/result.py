@@ -110,3 +110,6 @@ class Components:
     _voxels: np.ndarray | None = field(default=None, repr=False)
     # (3,) the sensor in the points' frame, when known (what it cannot see fills footprints).
     _origin: np.ndarray | None = field(default=None, repr=False)
+    # (M,) bool: the candidates the convex method left whole (too sparse for convexity);
+    # None for the other methods. Their stacks are cut by layers (see layers.cut_layers).
+    _sparse: np.ndarray | None = field(default=None, repr=False)

@@ -19,6 +19,7 @@ import numpy as np
 
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
+from supportnode.geometry.objects.layers import Groups
 from supportnode.geometry.objects.split_concave import _CONCAVE_MAX_EXTENT, _split_concave
 from supportnode.geometry.objects.split_footprint import Fill, _may_split, _split_recursive
 from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_step
@@ -40,11 +41,13 @@ def _split_touching(
     stats: dict,
     memo: Memo | None = None,
     origin: np.ndarray | None = None,
+    groups: Groups | None = None,
 ) -> np.ndarray:
     """Cut clusters whose x, y footprint has large parts joined by a neck (see _split_footprint),
     or else whose top steps between two flat levels side by side (see _split_step). memo: the
     cuts of clusters seen with the same points in the previous detection; origin: (3,) the
-    sensor, metres, or None (what other clusters hide from it fills a footprint's notches)."""
+    sensor, metres, or None (what other clusters hide from it fills a footprint's notches);
+    groups: ``group_rows(cp, lab, n)`` when the caller has it (layers.cut_layers)."""
     cell = params.cluster_cell / _SPLIT_CELL_DIVISOR
     radius = params.split_neck_width / 2.0
     n = int(lab.max()) + 1
@@ -53,7 +56,7 @@ def _split_touching(
         return out
     # The clusters' rows (a stable counting sort) and boxes, to skip the clusters too narrow
     # to split without gathering their points (most clusters: wall strips, small objects).
-    start, order, _, box_lo, box_hi = group_rows(cp, lab, n)
+    start, order, _, box_lo, box_hi = groups if groups is not None else group_rows(cp, lab, n)
     nonempty = start[1:] > start[:-1]
     box_lo[~nonempty] = 0.0
     box_hi[~nonempty] = 0.0

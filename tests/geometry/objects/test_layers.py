@@ -1,0 +1,205 @@
+"""Stacks in clusters too sparse for convexity (layers.py): a box on a box, a sphere in a
+bowl are two objects; one box, a laptop, a cone, a lamp, two boxes side by side are not cut."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from supportnode.geometry.objects import detect_objects
+from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.kernels.layers import screen_levels
+
+TABLE = 0.75
+SPACING = 0.02  # a sparsely sampled scene: a few points per 3 cm voxel
+
+
+def _table() -> Surface:
+    ii, jj = np.meshgrid(np.arange(-10, 10), np.arange(-10, 10), indexing="ij")
+    cells = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)
+    return Surface(
+        id=0,
+        height=TABLE,
+        area=4.0,
+        centroid=np.array([0.0, 0.0, TABLE]),
+        normal=np.array([0.0, 0.0, 1.0]),
+        flatness=0.0,
+        bbox_min=np.array([-1.0, -1.0, TABLE]),
+        bbox_max=np.array([1.0, 1.0, TABLE]),
+        outline=[np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])],
+        point_count=0,
+        voxel_count=len(cells),
+        cells=cells,
+        cell_size=(0.1, 0.1),
+    )
+
+
+def _box(lo, hi, rng) -> np.ndarray:
+    """Points uniformly on the five faces of a box seen from above (no bottom), about one
+    per SPACING^2."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    out = []
+    for axis in range(3):
+        other = [a for a in range(3) if a != axis]
+        area = np.prod(hi[other] - lo[other])
+        for end in (lo[axis], hi[axis]) if axis < 2 else (hi[axis],):
+            n = rng.poisson(area / SPACING**2)
+            f = np.empty((n, 3))
+            f[:, other] = rng.uniform(lo[other], hi[other], (n, 2))
+            f[:, axis] = end
+            out.append(f)
+    return np.concatenate(out)
+
+
+def _sphere(centre, r, rng) -> np.ndarray:
+    n = rng.poisson(4 * np.pi * r**2 / SPACING**2)
+    d = rng.normal(size=(n, 3))
+    return np.asarray(centre) + r * d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _cone(centre, r, h, rng) -> np.ndarray:
+    """The side of an upright cone, its base on the table at centre (x, y)."""
+    n = rng.poisson(np.pi * r * np.hypot(r, h) / SPACING**2)
+    t = np.sqrt(rng.uniform(0, 1, n))  # area grows with the distance from the tip
+    a = rng.uniform(0, 2 * np.pi, n)
+    return np.c_[centre[0] + r * t * np.cos(a), centre[1] + r * t * np.sin(a), TABLE + h * (1 - t)]
+
+
+def _without(p: np.ndarray, lo, hi) -> np.ndarray:
+    """p less the points inside (or on) the box [lo, hi]: what another object covers."""
+    inside = np.all((p >= np.asarray(lo) - 1e-3) & (p <= np.asarray(hi) + 1e-3), axis=1)
+    return p[~inside]
+
+
+def _detect(parts: list[np.ndarray]):
+    pts = np.concatenate(parts)
+    res = detect_objects(pts, SurfaceResult([_table()], np.full(len(pts), -1, np.int32)))
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    return res, [res.labels[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+def _whole(lab: np.ndarray) -> int:
+    """The one cluster holding (nearly) all of a part's points."""
+    ids, counts = np.unique(lab, return_counts=True)
+    assert counts.max() >= 0.9 * len(lab), dict(zip(ids.tolist(), counts.tolist(), strict=True))
+    return int(ids[counts.argmax()])
+
+
+def test_a_box_on_a_box_is_two_objects_the_upper_on_the_lower():
+    rng = np.random.default_rng(0)
+    lower_hi = (0.1, 0.075, TABLE + 0.08)
+    lower = _without(_box((-0.1, -0.075, TABLE), lower_hi, rng), (-0.06, -0.05, 0), (0.06, 0.05, 1))
+    upper = _box((-0.06, -0.05, TABLE + 0.08), (0.06, 0.05, TABLE + 0.14), rng)
+    res, (a, b) = _detect([lower, upper])
+    ia, ib = _whole(a), _whole(b)
+    assert ia != ib
+    assert res.clusters[ib].supported_by == ia
+    assert res.clusters[ia].surface_id == 0 and res.clusters[ib].surface_id == 0
+
+
+def test_a_sphere_in_a_low_bowl_is_its_own_object():
+    rng = np.random.default_rng(1)
+    base = _without(
+        _box((-0.12, -0.12, TABLE), (0.12, 0.12, TABLE + 0.05), rng),
+        (-0.03, -0.03, 0),
+        (0.03, 0.03, 1),
+    )
+    ball = _sphere((0.0, 0.0, TABLE + 0.05 + 0.045), 0.045, rng)
+    ball = ball[ball[:, 2] > TABLE + 0.052]  # the cap inside the box's top is hidden
+    _, (a, b) = _detect([base, ball])
+    assert _whole(a) != _whole(b)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_one_box_one_cone_one_sphere_are_not_cut(seed):
+    rng = np.random.default_rng(seed)
+    box = _box((-0.6, -0.1, TABLE), (-0.4, 0.1, TABLE + 0.25), rng)
+    cone = _cone((0.0, 0.0), 0.08, 0.2, rng)
+    ball = _sphere((0.5, 0.0, TABLE + 0.1), 0.1, rng)
+    res, labs = _detect([box, cone, ball])
+    whole = [_whole(lab) for lab in labs]
+    assert len(set(whole)) == 3
+    assert res.stats["layer_splits"] == 0
+
+
+def test_a_laptop_and_a_lamp_stay_whole():
+    rng = np.random.default_rng(3)
+    # An open laptop: a 2 cm base, its screen rising flush with the base's back edge.
+    base = _box((-0.6, -0.16, TABLE), (-0.37, 0.16, TABLE + 0.02), rng)
+    screen = _box((-0.38, -0.16, TABLE + 0.02), (-0.37, 0.16, TABLE + 0.24), rng)
+    base = _without(base, (-0.38, -0.16, TABLE + 0.015), (-0.37, 0.16, 1.0))
+    # A lamp: a 2 cm base, a thin stem, a wide shade (its sides) around the stem's top.
+    foot = _box((0.3, -0.07, TABLE), (0.44, 0.07, TABLE + 0.02), rng)
+    h = np.arange(TABLE + 0.02, TABLE + 0.34, 0.01)  # a thin stem up into the shade
+    stem = np.c_[np.full(len(h), 0.37), np.zeros(len(h)), h]
+    shade = _box((0.26, -0.11, TABLE + 0.22), (0.48, 0.11, TABLE + 0.34), rng)
+    res, labs = _detect([np.r_[base, screen], np.r_[foot, stem, shade]])
+    assert _whole(labs[0]) != _whole(labs[1])
+    assert res.stats["layer_splits"] == 0
+
+
+def test_a_tall_box_beside_a_low_one_is_not_cut_at_the_low_top():
+    rng = np.random.default_rng(4)
+    low = _without(
+        _box((-0.1, -0.1, TABLE), (0.1, 0.1, TABLE + 0.08), rng), (0.1, -1, 0), (1, 1, 1)
+    )
+    tall = _box((0.1, -0.08, TABLE), (0.25, 0.08, TABLE + 0.3), rng)
+    res, _ = _detect([low, tall])
+    assert res.stats["layer_splits"] == 0
+
+
+def _numpy_screen(z, xy, bottom, top, clear, slab, min_window, min_up, min_out):
+    """The numpy version screen_levels replaced (histogram, windows, suffix boxes)."""
+    empty = np.zeros(0, np.int64)
+    edges = np.arange(bottom - slab, top + slab, slab)
+    if top <= bottom or len(edges) < 4 or len(z) == 0:
+        return np.zeros(0), empty, empty, empty, np.zeros(0, bool)
+    count = np.histogram(z, edges)[0]
+    window = count[:-2] + count[1:-1] + count[2:]
+    padded = np.r_[-1, window, -1]
+    peak = (window >= padded[:-2]) & (window > padded[2:]) & (window >= min_window)
+    levels = ((edges[1:-2] + edges[2:-1]) / 2.0)[peak][::-1]
+    a = np.searchsorted(z, levels - 1.5 * slab, "right")
+    b = np.searchsorted(z, levels + 1.5 * slab, "right")
+    u = np.searchsorted(z, levels + clear, "right")
+    n = len(z)
+    whole = np.zeros(len(levels), bool)
+    for i in range(len(levels)):
+        if a[i] >= b[i] or u[i] >= n or n - u[i] < min_up:
+            continue
+        lo, hi = xy[u[i] :].min(axis=0) - slab, xy[u[i] :].max(axis=0) + slab
+        out = ~np.all((xy[a[i] : b[i]] >= lo) & (xy[a[i] : b[i]] <= hi), axis=1)
+        whole[i] = out.sum() >= min_out
+    return levels, a, b, u, whole
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(0, 300),
+    seed=st.integers(0, 10_000),
+    clear=st.sampled_from([0.004, 0.015, 0.03]),
+    min_window=st.integers(1, 12),
+)
+def test_screen_levels_matches_numpy(n, seed, clear, min_window):
+    rng = np.random.default_rng(seed)
+    # Heights on a few shelves (ties, peaks) and spread between; x, y in a few boxes.
+    z = np.sort(np.r_[rng.choice([0.1, 0.13, 0.2], n // 2), rng.uniform(0.0, 0.3, n - n // 2)])
+    xy = rng.uniform(-0.1, 0.1, (n, 2)) * rng.choice([0.3, 1.0], (n, 1))
+    args = (0.02, 0.28, clear, 0.005, min_window, 5.0, 1.0)
+    got = screen_levels(z, xy, *args)
+    want = _numpy_screen(z, xy, *args)
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(g, w)
+
+
+def test_screen_levels_bad_input():
+    with pytest.raises(ValueError, match="ascend"):
+        screen_levels(np.array([0.2, 0.1]), np.zeros((2, 2)), 0.0, 0.3, 0.01, 0.005, 1, 1, 1)
+    with pytest.raises(ValueError, match="one row per height"):
+        screen_levels(np.array([0.1, 0.2]), np.zeros((3, 2)), 0.0, 0.3, 0.01, 0.005, 1, 1, 1)
+    with pytest.raises(ValueError, match="positive"):
+        screen_levels(np.array([0.1]), np.zeros((1, 2)), 0.0, 0.3, 0.01, 0.0, 1, 1, 1)
