@@ -14,7 +14,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["screen_levels"]
+__all__ = ["may_hold", "screen_levels"]
 
 
 @njit(cache=True, nogil=True)
@@ -103,6 +103,64 @@ def _screen(z, xy, edges, clear, slab, min_window, min_up, min_out):
     return levels, a, b, u, whole
 
 
+@njit(cache=True, nogil=True)
+def _may_hold(p, slab, clear, min_up, min_out):
+    n = p.shape[0]
+    zmin, zmax = np.inf, -np.inf
+    for r in range(n):
+        zmin = min(zmin, p[r, 2])
+        zmax = max(zmax, p[r, 2])
+    nb = int((zmax - zmin) / slab) + 1
+    lo = np.full((nb + 1, 2), np.inf)  # row nb: above everything, an empty box
+    hi = np.full((nb + 1, 2), -np.inf)
+    up = np.zeros(nb + 1, np.int64)
+    k_of = np.empty(n, np.int64)
+    for r in range(n):
+        k = min(int((p[r, 2] - zmin) / slab), nb - 1)
+        k_of[r] = k
+        up[k] += 1
+        for d in range(2):
+            lo[k, d] = min(lo[k, d], p[r, d])
+            hi[k, d] = max(hi[k, d], p[r, d])
+    for k in range(nb - 1, -1, -1):  # suffixes: the rows from bin k up
+        up[k] += up[k + 1]
+        for d in range(2):
+            lo[k, d] = min(lo[k, d], lo[k + 1, d])
+            hi[k, d] = max(hi[k, d], hi[k + 1, d])
+    # A point of bin k lies in the slab of levels L < e_k + 2.5 slab only, and what rises
+    # above such a level's clearance includes all of bins k + reach up: their box is inside
+    # that level's box, and a point outside the larger box is outside the smaller one. One
+    # bin of margin each way for rounding.
+    reach = math.ceil(2.5 + clear / slab) + 1
+    highest = zmax - clear + 1.5 * slab  # no level's slab reaches above
+    out = 0
+    for r in range(n):
+        k = k_of[r]
+        if p[r, 2] > highest + slab or up[max(k - 1, 0)] < min_up:
+            continue
+        j = min(k + reach, nb)
+        inside = True
+        for d in range(2):
+            if p[r, d] < lo[j, d] - slab or p[r, d] > hi[j, d] + slab:
+                inside = False
+        if not inside:
+            out += 1
+            if out >= min_out:
+                return True
+    return False
+
+
+def may_hold(p: np.ndarray, slab: float, clear: float, min_up: float, min_out: float) -> bool:
+    """Whether any level of the cluster p (P, 3) float64 (metres, any order) might be worth
+    trying (see :func:`screen_levels`): False only when none can be, from boxes of 5 mm bins
+    in one pass, without sorting; a lidar's single box (each line inside the box of what is
+    above it) is done here."""
+    p = np.ascontiguousarray(p, np.float64).reshape(-1, 3)
+    if len(p) == 0 or not slab > 0:
+        return False
+    return bool(_may_hold(p, float(slab), float(clear), float(min_up), float(min_out)))
+
+
 def screen_levels(
     z: np.ndarray,
     xy: np.ndarray,
@@ -142,3 +200,4 @@ def _warm() -> None:
     z = np.linspace(0.0, 0.2, 40)
     xy = np.zeros((40, 2))
     screen_levels(z, xy, 0.0, 0.18, 0.015, 0.005, 5, 5.0, 1.0)
+    may_hold(np.c_[xy, z], 0.005, 0.015, 5.0, 1.0)

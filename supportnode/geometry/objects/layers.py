@@ -25,7 +25,7 @@ from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.stacks import _INSIDE, _MAX_BESIDE, _MIN_SHARE, _MIN_TOP
 from supportnode.kernels.groups import group_rows
-from supportnode.kernels.layers import screen_levels
+from supportnode.kernels.layers import may_hold, screen_levels
 from supportnode.params import ObjectParams
 
 # `kernels.groups.group_rows`' answer: start, rows, points, lo, hi.
@@ -110,6 +110,10 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     """(P,) part of each point of the cluster p (P, 3), 0 for the one on the surface, or None
     when nothing in it stands on anything else. Higher levels first: a stack of three parts
     its top box, then the middle one."""
+    min_face = max(min_points // 2, 5)
+    min_up = max(min_points, _MIN_SHARE * len(p))
+    if not may_hold(p, _SLAB, clear, min_up, _BEYOND * min_face):
+        return None  # most clusters: no level could show a face beyond what rises from it
     order = np.argsort(p[:, 2], kind="stable")
     q = p[order]  # by height: a level's slab and what rises above it are runs of rows
     z, xy = q[:, 2], q[:, :2]
@@ -121,7 +125,6 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     # rises above it, and enough of it lies outside the box of what rises to show beyond it
     # (a lidar's line across one box does not). Compiled: a lidar's cluster has a level at
     # every line.
-    min_face = max(min_points // 2, 5)
     levels, a, b, u, whole = screen_levels(
         z,
         xy,
@@ -130,7 +133,7 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
         clear,
         _SLAB,
         min_face,
-        max(min_points, _MIN_SHARE * len(z)),
+        min_up,
         _BEYOND * min_face,
     )
     if not whole.any():

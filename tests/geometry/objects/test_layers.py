@@ -203,3 +203,45 @@ def test_screen_levels_bad_input():
         screen_levels(np.array([0.1, 0.2]), np.zeros((3, 2)), 0.0, 0.3, 0.01, 0.005, 1, 1, 1)
     with pytest.raises(ValueError, match="positive"):
         screen_levels(np.array([0.1]), np.zeros((1, 2)), 0.0, 0.3, 0.01, 0.0, 1, 1, 1)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    n=st.integers(1, 300),
+    seed=st.integers(0, 10_000),
+    clear=st.sampled_from([0.0075, 0.015, 0.03]),
+    min_up=st.sampled_from([1.0, 5.0, 30.0]),
+)
+def test_may_hold_never_rejects_a_cluster_worth_trying(n, seed, clear, min_up):
+    from supportnode.kernels.layers import may_hold
+
+    rng = np.random.default_rng(seed)
+    z = np.r_[rng.choice([0.1, 0.13, 0.2], n // 2), rng.uniform(0.0, 0.3, n - n // 2)]
+    xy = rng.uniform(-0.1, 0.1, (n, 2)) * np.where(z > 0.15, 0.3, 1.0)[:, None]
+    p = np.c_[xy, z][rng.permutation(n)]
+    order = np.argsort(p[:, 2], kind="stable")
+    zs, xys = p[order, 2], p[order, :2]
+    whole = screen_levels(zs, xys, zs[0] + 0.02, zs[-1] - clear, clear, 0.005, 1, min_up, 1.0)[4]
+    if whole.any():
+        assert may_hold(p, 0.005, clear, min_up, 1.0)
+
+
+def test_may_hold_passes_over_a_single_box_but_not_a_stack():
+    from supportnode.kernels.layers import may_hold
+
+    rng = np.random.default_rng(5)
+    # A lidar's lines across one box's front (the highest 4 cm below its edge) and its top:
+    # each inside the box of what is above it. (A line within the 3.5 cm the screen looks
+    # up may pass it: then the exact screen decides.)
+    h = np.arange(TABLE, TABLE + 0.16, 0.012)
+    front = np.c_[rng.uniform(-0.1, 0.1, (len(h), 40)).ravel(), np.full(len(h) * 40, -0.05)]
+    front = np.c_[front, np.repeat(h, 40)]
+    top = np.c_[rng.uniform(-0.1, 0.1, (200, 2)) * [1, 0.5], np.full(200, TABLE + 0.2)]
+    assert not may_hold(np.r_[front, top], 0.005, 0.015, 30.0, 2.25)
+    lower = _without(
+        _box((-0.1, -0.075, TABLE), (0.1, 0.075, TABLE + 0.08), rng),
+        (-0.06, -0.05, 0),
+        (0.06, 0.05, 1),
+    )
+    upper = _box((-0.06, -0.05, TABLE + 0.08), (0.06, 0.05, TABLE + 0.14), rng)
+    assert may_hold(np.r_[lower, upper], 0.005, 0.015, 30.0, 2.25)
