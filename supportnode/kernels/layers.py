@@ -13,34 +13,9 @@ import numpy as np
 from numba import njit
 
 from supportnode.kernels.runtime import warmer
+from supportnode.kernels.search import first_above, first_at
 
 __all__ = ["may_hold", "screen_levels"]
-
-
-@njit(cache=True, nogil=True)
-def _first_above(z, v, lo):
-    """The first row from ``lo`` whose z > v (np.searchsorted(z, v, "right"))."""
-    hi = z.size
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if z[mid] <= v:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True, nogil=True)
-def _first_at(z, v, lo):
-    """The first row from ``lo`` whose z >= v (np.searchsorted(z, v, "left"))."""
-    hi = z.size
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if z[mid] < v:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
 
 
 @njit(cache=True, nogil=True)
@@ -48,12 +23,12 @@ def _screen(z, xy, edges, clear, slab, min_window, min_up, min_out):
     n = z.size
     nb = edges.size - 1
     count = np.zeros(nb, np.int64)
-    prev = _first_at(z, edges[0], 0)
+    prev = first_at(z, edges[0], 0)
     for k in range(nb):  # np.histogram's bins: [a, b), the last one [a, b]
         if k == nb - 1:
-            nxt = _first_above(z, edges[k + 1], prev)
+            nxt = first_above(z, edges[k + 1], prev)
         else:
-            nxt = _first_at(z, edges[k + 1], prev)
+            nxt = first_at(z, edges[k + 1], prev)
         count[k] = nxt - prev
         prev = nxt
     # Windows around bins 1 .. nb - 2; local maxima (>= left, > right; -1 beyond the ends).
@@ -74,11 +49,11 @@ def _screen(z, xy, edges, clear, slab, min_window, min_up, min_out):
     b = np.empty(peaks, np.int64)
     u = np.empty(peaks, np.int64)
     whole = np.zeros(peaks, np.bool_)
-    if peaks == 0:
-        return levels, a, b, u, whole
     # The x, y box of the rows from each row up.
     lo = np.empty((n, 2))
     hi = np.empty((n, 2))
+    if peaks == 0:
+        return levels, a, b, u, whole, lo[:0], hi[:0]
     lo[n - 1] = xy[n - 1]
     hi[n - 1] = xy[n - 1]
     for r in range(n - 2, -1, -1):
@@ -86,9 +61,9 @@ def _screen(z, xy, edges, clear, slab, min_window, min_up, min_out):
             lo[r, d] = min(xy[r, d], lo[r + 1, d])
             hi[r, d] = max(xy[r, d], hi[r + 1, d])
     for i in range(peaks):
-        a[i] = _first_above(z, levels[i] - 1.5 * slab, 0)
-        b[i] = _first_above(z, levels[i] + 1.5 * slab, a[i])
-        u[i] = _first_above(z, levels[i] + clear, 0)
+        a[i] = first_above(z, levels[i] - 1.5 * slab, 0)
+        b[i] = first_above(z, levels[i] + 1.5 * slab, a[i])
+        u[i] = first_above(z, levels[i] + clear, 0)
         if a[i] >= b[i] or u[i] >= n or n - u[i] < min_up:
             continue
         out = 0
@@ -100,7 +75,7 @@ def _screen(z, xy, edges, clear, slab, min_window, min_up, min_out):
             if not inside:
                 out += 1
         whole[i] = out >= min_out
-    return levels, a, b, u, whole
+    return levels, a, b, u, whole, lo, hi
 
 
 @njit(cache=True, nogil=True)
@@ -171,7 +146,7 @@ def screen_levels(
     min_window: int,
     min_up: float,
     min_out: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, ...]:
     """A cluster's levels and which to try. z (P,) float64 heights ascending, xy (P, 2)
     float64 the same rows' x, y (metres). The histogram of z in bins of ``slab`` from
     ``bottom - slab`` up to ``top``: a level is the centre of a bin whose three-bin window
@@ -179,7 +154,8 @@ def screen_levels(
     the one above (levels (L,), highest first). For each: a, b (L,) int64 its slab's rows
     (z within 1.5 slab), u (L,) the first row above ``level + clear``, and whole (L,) bool:
     at least ``min_up`` rows above u and at least ``min_out`` of the slab's points outside
-    the x, y box of the rows from u up grown by ``slab``."""
+    the x, y box of the rows from u up grown by ``slab``; and lo, hi (P, 2) that box for
+    every row (the rows from it up; (0, 2) when there is no level)."""
     z = np.ascontiguousarray(z, np.float64)
     xy = np.ascontiguousarray(xy, np.float64).reshape(-1, 2)
     if xy.shape[0] != z.size:
@@ -191,7 +167,8 @@ def screen_levels(
     edges = np.arange(bottom - slab, top + slab, slab)
     if top <= bottom or len(edges) < 4 or z.size == 0 or not math.isfinite(clear):
         empty = np.zeros(0, np.int64)
-        return np.zeros(0), empty, empty.copy(), empty.copy(), np.zeros(0, bool)
+        box = np.zeros((0, 2))
+        return np.zeros(0), empty, empty.copy(), empty.copy(), np.zeros(0, bool), box, box.copy()
     return _screen(z, xy, edges, float(clear), float(slab), int(min_window), min_up, min_out)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from supportnode.kernels.runtime import warmer
+from supportnode.kernels.search import first_at
 
 __all__ = ["shared_cells"]
 
@@ -22,15 +23,8 @@ def _shared(ca, la, cb, lb, na, nb):
     m = cb.size
     for i in range(ca.size):
         c = ca[i]
-        lo, hi = 0, m  # the first cb >= c
-        while lo < hi:
-            mid = (lo + hi) >> 1
-            if cb[mid] < c:
-                lo = mid + 1
-            else:
-                hi = mid
         row = la[i]
-        j = lo
+        j = first_at(cb, c, 0)
         while j < m and cb[j] == c:  # a cell in several footprints of b: each counts
             inter[row, lb[j]] += 1
             j += 1

@@ -123,9 +123,9 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     # clearance below the top, highest first; each one's slab [a, b) of rows and first row
     # u above its clearance; and whether, with nothing cut yet, it is worth trying: enough
     # rises above it, and enough of it lies outside the box of what rises to show beyond it
-    # (a lidar's line across one box does not). Compiled: a lidar's cluster has a level at
-    # every line.
-    levels, a, b, u, whole = screen_levels(
+    # (a lidar's line across one box does not); and the x, y box of the rows from each row
+    # up. Compiled: a lidar's cluster has a level at every line.
+    levels, a, b, u, whole, *above = screen_levels(
         z,
         xy,
         bottom + _MIN_TOP,
@@ -138,18 +138,13 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     )
     if not whole.any():
         return None  # no level of the uncut cluster: nothing is ever cut
-    # The x, y box of everything above each row (suffix extremes).
-    above = (
-        np.minimum.accumulate(xy[::-1], axis=0)[::-1],
-        np.maximum.accumulate(xy[::-1], axis=0)[::-1],
-    )
     part = np.zeros(len(q), np.int64)
     n_parts = 1
     everything = np.ones(len(q), bool)
     for i, level in enumerate(levels.tolist()):
         if n_parts == 1 and not whole[i]:
             continue
-        box = _rising_box(xy, part, n_parts, (a[i], b[i], u[i]), min_points, above)
+        box = _rising_box(xy, part, n_parts, (a[i], b[i], u[i]), min_points, (above[0], above[1]))
         if box is None:
             continue
         mine = everything if n_parts == 1 else part == box[2]

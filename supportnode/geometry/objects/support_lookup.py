@@ -140,8 +140,8 @@ class _SupportTable:
         cls,
         lookups: list[_SupportLookup],
         tol: float,
-        rings: Sequence[tuple[int, _SupportLookup]] = (),
-        cp: np.ndarray | None = None,
+        rings: Sequence[tuple[int, _SupportLookup]],
+        cp: np.ndarray,
     ) -> _SupportTable | None:
         """From lookups sorted by height (each over its footprint from ``height - tol`` up)
         and ``rings`` (k, the dilated lookup of lookups[k]), each over its cells off
@@ -169,8 +169,7 @@ class _SupportTable:
 
         masks = [placed(lk) for lk in lookups]
         if rings:
-            pts = np.zeros((0, 3)) if cp is None else cp
-            low = lowest_per_cell(pts, lookups[0].cell, lo, (h, w))
+            low = lowest_per_cell(cp, lookups[0].cell, lo, (h, w))
             plain = list(masks)
             for k, ring in rings:
                 masks.append(placed(ring) & ~_shadowing(plain, lookups, k))

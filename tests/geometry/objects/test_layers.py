@@ -154,15 +154,17 @@ def test_a_tall_box_beside_a_low_one_is_not_cut_at_the_low_top():
 
 def _numpy_screen(z, xy, bottom, top, clear, slab, min_window, min_up, min_out):
     """The numpy version screen_levels replaced (histogram, windows, suffix boxes)."""
-    empty = np.zeros(0, np.int64)
+    empty, box = np.zeros(0, np.int64), np.zeros((0, 2))
     edges = np.arange(bottom - slab, top + slab, slab)
     if top <= bottom or len(edges) < 4 or len(z) == 0:
-        return np.zeros(0), empty, empty, empty, np.zeros(0, bool)
+        return np.zeros(0), empty, empty, empty, np.zeros(0, bool), box, box
     count = np.histogram(z, edges)[0]
     window = count[:-2] + count[1:-1] + count[2:]
     padded = np.r_[-1, window, -1]
     peak = (window >= padded[:-2]) & (window > padded[2:]) & (window >= min_window)
     levels = ((edges[1:-2] + edges[2:-1]) / 2.0)[peak][::-1]
+    if len(levels) == 0:
+        return levels, empty, empty, empty, np.zeros(0, bool), box, box
     a = np.searchsorted(z, levels - 1.5 * slab, "right")
     b = np.searchsorted(z, levels + 1.5 * slab, "right")
     u = np.searchsorted(z, levels + clear, "right")
@@ -174,7 +176,9 @@ def _numpy_screen(z, xy, bottom, top, clear, slab, min_window, min_up, min_out):
         lo, hi = xy[u[i] :].min(axis=0) - slab, xy[u[i] :].max(axis=0) + slab
         out = ~np.all((xy[a[i] : b[i]] >= lo) & (xy[a[i] : b[i]] <= hi), axis=1)
         whole[i] = out.sum() >= min_out
-    return levels, a, b, u, whole
+    lo = np.minimum.accumulate(xy[::-1], axis=0)[::-1]  # the box of the rows from each up
+    hi = np.maximum.accumulate(xy[::-1], axis=0)[::-1]
+    return levels, a, b, u, whole, lo, hi
 
 
 @settings(max_examples=60, deadline=None)
