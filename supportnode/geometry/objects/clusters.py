@@ -77,6 +77,7 @@ def _cluster_voxel(
     stats["sampled"] = m
     if m == 0:
         stats["voxels"] = 0
+        stats["_voxel_of_point"] = np.zeros(0, np.int64)  # nothing for convexity either
         return np.zeros(0, dtype=np.int64)
     # +1: a one-voxel empty border, so a neighbour offset can never wrap into the next row.
     keys, dims = grid_keys(cp, voxel_size)
@@ -136,13 +137,16 @@ def _voxel_links_sorted(
     return nv, inv, np.concatenate(rows), np.concatenate(cols)
 
 
-def _drop_small(lab: np.ndarray, min_points: int) -> np.ndarray:
-    """Relabel to 0..K-1 keeping components with >= min_points points; others become -1."""
+def _drop_small(lab: np.ndarray, min_points: int, more: np.ndarray | None = None) -> np.ndarray:
+    """Relabel to 0..K-1 keeping components with >= min_points points; others become -1.
+    more: (Q,) labels of points that will join the components (counted, not relabelled)."""
     if len(lab) == 0 or lab.max() < 0:
         return np.full(len(lab), -1, dtype=np.int64)
     # Counting instead of np.unique: no sort, and kept labels stay in ascending order; label
     # -1 counted first, then mapped by the table's last entry: one gather, no masks.
     counts = np.bincount(lab + 1)[1:]
+    if more is not None and len(more):
+        counts += np.bincount(more + 1, minlength=len(counts) + 1)[1 : len(counts) + 1]
     keep = counts >= min_points
     new_id = np.full(len(counts) + 1, -1, dtype=np.int64)
     new_id[:-1][keep] = np.arange(int(keep.sum()))

@@ -30,6 +30,7 @@ from supportnode.geometry.objects.convexity import CELL_STEPS, cell_levels, clus
 from supportnode.geometry.objects.describe import _describe, _stack
 from supportnode.geometry.objects.feet import claim_feet, claim_raised
 from supportnode.geometry.objects.layers import cut_layers
+from supportnode.geometry.objects.level import nearest_bottom, set_aside
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -92,27 +93,43 @@ def cluster_objects(
     sensor_origin: (3,) sensor position in the points' frame when known (the convex method
     turns its normals toward it and widens the table band with range)."""
     params = params or ObjectParams()
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise InputError(f"points must have shape (N, 3), got {pts.shape}")
-    surf_labels = np.asarray(surfaces.labels)
-    if surf_labels.shape != (len(pts),):
-        raise InputError(f"surface labels have shape {surf_labels.shape}, expected ({len(pts)},)")
-    if not np.isfinite(pts).all():
-        raise InputError("points contain NaN or infinite values")
+    if params.method == "convex" and not any(s.band[0] > 0 for s in surfaces.surfaces):
+        # Groups by voxels first (their level points set aside, see level), segmented by
+        # convexity where they are dense enough: as the pipeline runs it, free space between.
+        voxel = dataclasses.replace(params, method="voxel")
+        groups = _components(points, surfaces, voxel, sensor_origin)
+        return convex_components(groups, points, surfaces, params, sensor_origin)
+    return _components(points, surfaces, params, sensor_origin)
 
+
+def _components(
+    points: np.ndarray,
+    surfaces: SurfaceResult,
+    params: ObjectParams,
+    sensor_origin: np.ndarray | None = None,
+) -> Components:
+    """:func:`cluster_objects` by ``params.method`` alone."""
+    pts, surf_labels = _checked(points, surfaces)
     t0 = time.perf_counter()
     cand = np.flatnonzero(surf_labels == -1)
     cp = np.take(pts, cand, axis=0)  # np.take: 5x faster than pts[cand] for (N, 3) rows
     stats: dict = {"method": params.method, "candidates": len(cand)}
     lookups = _lookups(surfaces.surfaces)
+    level = bottom = np.zeros(0, np.int64)
+    if params.method in ("voxel", "convex"):
+        support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
+    if params.method == "voxel":
+        # Grouped and split without the points at their surface's level, given back after
+        # (see level). Not by convexity: the crease at an object's foot parts it from them.
+        cand, cp, support, bottom, level = set_aside(
+            cand, cp, support, surfaces.surfaces, params.cluster_cell
+        )
+    stats["level_points"] = len(level)
     if params.method == "knn":
         lab = _cluster_knn(cp, params, stats)
     elif params.method == "voxel":
-        support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         lab = _cluster_voxel(cp, params.cluster_cell, stats, support)
     elif params.method == "convex":
-        support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)
         lab = cluster_convex(cp, surfaces.surfaces, support, params, sensor_origin, stats)
     else:
         raise InputError(
@@ -120,7 +137,9 @@ def cluster_objects(
         )
     voxels = stats.pop("_voxel_of_point", None)
     sparse = stats.pop("_sparse_point", None)
-    lab = _drop_small(lab, params.min_points)
+    level_xyz = np.take(pts, level, axis=0)
+    near = nearest_bottom(level_xyz, cp, lab, bottom, params.cluster_cell)
+    lab = _drop_small(lab, params.min_points, lab[near[near >= 0]])  # the level points count
     claimed = np.zeros(0, np.int64)
     if params.foot_reach > 0 and any(s.band[0] > 0 for s in surfaces.surfaces) and len(lab):
         if params.method == "knn":
@@ -129,6 +148,11 @@ def cluster_objects(
         stats["foot_points"] = len(claimed)
         if sparse is not None:  # the feet belong to dense (segmented) objects
             sparse = np.r_[sparse, np.zeros(len(cp) - len(sparse), bool)]
+    if len(level):  # last, after the feet: each with its nearest object point's label
+        given = np.full(len(near), -1, np.int64)
+        given[near >= 0] = lab[near[near >= 0]]
+        cand, cp = np.concatenate([cand, level]), np.concatenate([cp, level_xyz])
+        lab = np.concatenate([lab, given])
     stats["components"] = int(lab.max() + 1) if len(lab) else 0
     seg = _order(cp, lab, lookups[1], params)
     # Each component's surface by its label, for split_objects: a component that is not
@@ -145,8 +169,21 @@ def cluster_objects(
         voxels = None
     origin = None if sensor_origin is None else np.asarray(sensor_origin, np.float64)
     return Components(
-        seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels, origin, sparse
+        seg, cp, cand, lab, sids, lookups, len(pts), stats, claimed, voxels, origin, sparse, near
     )
+
+
+def _checked(points: np.ndarray, surfaces: SurfaceResult) -> tuple[np.ndarray, np.ndarray]:
+    """The (N, 3) float64 points and their (N,) surface labels, or InputError."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InputError(f"points must have shape (N, 3), got {pts.shape}")
+    surf_labels = np.asarray(surfaces.labels)
+    if surf_labels.shape != (len(pts),):
+        raise InputError(f"surface labels have shape {surf_labels.shape}, expected ({len(pts)},)")
+    if not np.isfinite(pts).all():
+        raise InputError("points contain NaN or infinite values")
+    return pts, surf_labels
 
 
 def convex_components(
@@ -159,14 +196,15 @@ def convex_components(
     """The ``convex`` method's components of the points, given ``components``, the same
     points' components by the ``voxel`` method (:func:`cluster_objects`, same arguments):
     those, when none of them is dense enough to be segmented by convexity (a lidar's or a
-    map's points: the convex method keeps them as they are), else :func:`cluster_objects`
-    with ``params`` (method ``convex``)."""
+    map's points: the convex method keeps them as they are), else the points segmented by
+    convexity (``params``, method ``convex``)."""
     vox = components._voxels
     if vox is None:
-        return cluster_objects(points, surfaces, params, sensor_origin)
-    level = cell_levels(components._points, components._labels, vox, params)
+        return _components(points, surfaces, params, sensor_origin)
+    m = len(components._points) - len(components._level_near)  # the voxels' points
+    level = cell_levels(components._points[:m], components._labels[:m], vox, params)
     if (level < len(CELL_STEPS)).any():
-        return cluster_objects(points, surfaces, params, sensor_origin)
+        return _components(points, surfaces, params, sensor_origin)
     stats = dict(components._stats, method="convex", dense_components=0)
     sparse = np.ones(len(components._points), bool)
     return dataclasses.replace(components, _stats=stats, _sparse=sparse)
@@ -245,11 +283,17 @@ def split_objects(
     stats["layer_splits"] = 0  # sparse clusters cut where one stands on another's top
     known = components._supports
     split = lab
+    near = components._level_near
+    m = len(cp) - len(near)  # the last rows: points at a surface's level (see level)
     if params.split_touching and len(lab):
         groups = None
-        if components._sparse is not None:
+        if components._sparse is not None:  # with the level points: bottoms measured on them
             split, groups = cut_layers(cp, split, components._sparse, known, params, stats)
-        split = _split_touching(cp, split, params, stats, memo, components._origin, groups)
+        level = None
+        if len(near):  # footprints without them (see level)
+            level = np.zeros(len(cp), bool)
+            level[m:] = True
+        split = _split_touching(cp, split, params, stats, memo, components._origin, groups, level)
     t2 = time.perf_counter()
     if stats["merged_splits"] == 0 and stats["layer_splits"] == 0:
         # Nothing split (the usual case): the clusters are the components, in their order.

@@ -113,3 +113,6 @@ class Components:
     # (M,) bool: the candidates the convex method left whole (too sparse for convexity);
     # None for the other methods. Their stacks are cut by layers (see layers.cut_layers).
     _sparse: np.ndarray | None = field(default=None, repr=False)
+    # (K,) int64: the last K candidates lie at their surface's level (see level.set_aside),
+    # segmented without them; each goes with the candidate at its row here (-1: none).
+    _level_near: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)

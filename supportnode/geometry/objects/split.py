@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
@@ -42,12 +43,14 @@ def _split_touching(
     memo: Memo | None = None,
     origin: np.ndarray | None = None,
     groups: Groups | None = None,
+    level: np.ndarray | None = None,
 ) -> np.ndarray:
     """Cut clusters whose x, y footprint has large parts joined by a neck (see _split_footprint),
     or else whose top steps between two flat levels side by side (see _split_step). memo: the
     cuts of clusters seen with the same points in the previous detection; origin: (3,) the
     sensor, metres, or None (what other clusters hide from it fills a footprint's notches);
-    groups: ``group_rows(cp, lab, n)`` when the caller has it (layers.cut_layers)."""
+    groups: ``group_rows(cp, lab, n)`` when the caller has it (layers.cut_layers); level:
+    (M,) bool, the points at their surface's level (see level.py), left out of footprints."""
     cell = params.cluster_cell / _SPLIT_CELL_DIVISOR
     radius = params.split_neck_width / 2.0
     n = int(lab.max()) + 1
@@ -81,17 +84,22 @@ def _split_touching(
         idx = order[start[c] : start[c + 1]]
         extent = float((hi[c] - lo[c]).max())
         fill = functools.partial(_fill_xy, cp, lab, idx, point_bottom, lo[c], hi[c], params, origin)
+        at = None if level is None else level[idx]
+        at = at if at is not None and at.any() and not at.all() else None
         if memo is None:  # the fill is found only for a cluster with a neck
             parts, n_parts, how = _split_one(
-                cp, idx, all_xy, extent, params, cell, radius, functools.cache(fill)
+                cp, idx, all_xy, extent, params, cell, radius, functools.cache(fill), at
             )
         else:  # a pure function of the cluster's points and of what fills its notches
             fill_xy = fill()
+            key = [np.take(all_xy, idx, axis=0), fill_xy]
+            if at is not None:  # which points are at the level: after a row of NaN
+                key += [np.full((1, 2), np.nan), np.c_[np.flatnonzero(at), np.zeros(at.sum())]]
             parts, n_parts, how = memo.get(
                 "split",
-                np.concatenate([np.take(all_xy, idx, axis=0), fill_xy]),
+                np.concatenate(key),
                 functools.partial(
-                    _split_one, cp, idx, all_xy, extent, params, cell, radius, fill_xy
+                    _split_one, cp, idx, all_xy, extent, params, cell, radius, fill_xy, at
                 ),
             )
         if how is not None:
@@ -182,23 +190,50 @@ def _split_one(
     cell: float,
     radius: float,
     fill: Fill = None,
+    level: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, str | None]:
     """Parts (P,) of the cluster of points cp[idx] (x, y footprint extent in metres), their
     number, and the stats key of the rule that cut it ("step_splits", "concave_splits"; None
     for a neck or no cut). fill: what fills its footprint's notches (see _fill_xy and
-    split_footprint.Fill)."""
+    split_footprint.Fill). level: (P,) bool, its points at the surface's level: left out of
+    the footprint (the table's skirt would fill its necks) and the step rule (it would be a
+    flat level of its own), each in the part of its nearest other point in x, y."""
     xy_c = np.take(all_xy, idx, axis=0)
-    parts = _split_recursive(xy_c, cell, radius, params.min_points, _SPLIT_DEPTH, fill)
+    own = np.arange(len(idx)) if level is None else np.flatnonzero(~level)
+    xy_own = xy_c if level is None else np.take(xy_c, own, axis=0)
+    parts = _split_recursive(xy_own, cell, radius, params.min_points, _SPLIT_DEPTH, fill)
     n_parts = int(parts.max()) + 1
     if n_parts >= 2 or extent > _STEP_MAX_EXTENT:
-        return parts, n_parts, None
+        return _with_level(parts, level, xy_c), n_parts, None
     p_c = np.take(cp, idx, axis=0)
-    step, dense = _split_step(p_c, params.cluster_cell, params.min_points)
+    step, dense = _split_step(
+        p_c if level is None else p_c[own], params.cluster_cell, params.min_points
+    )
     if step is not None:
-        return step, 2, "step_splits"
+        return _with_level(step, level, xy_c), 2, "step_splits"
     if dense and params.split_concave and extent <= _CONCAVE_MAX_EXTENT:
-        # Not tried on sparse footprints (far scans) or wide structure.
+        # Not tried on sparse footprints (far scans) or wide structure. With the level points:
+        # the crease rule was built on them (its parts stand on the cluster's bottom).
         conc = _split_concave(p_c, params.cluster_cell, params.concave_tolerance, params.min_points)
         if conc is not None:
             return conc, int(conc.max()) + 1, "concave_splits"
-    return parts, n_parts, None
+    return _with_level(parts, level, xy_c), n_parts, None
+
+
+def _with_level(parts: np.ndarray, level: np.ndarray | None, xy: np.ndarray) -> np.ndarray:
+    """(P,) parts of all the cluster's points xy (P, 2) from ``parts`` of those not at the
+    level (level: (P,) bool or None): each level point in the part of its nearest other
+    point in x, y."""
+    if level is None:
+        return parts
+    out = np.zeros(len(xy), np.int64)
+    own = ~level
+    out[own] = parts
+    if parts.max() > 0:
+        out[level] = parts[cKDTree(xy[own]).query(xy[level])[1]]
+    return out
+
+
+def _nearest(xy: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """(Q,) row of the point of xy (P, 2) nearest each of query (Q, 2)."""
+    return cKDTree(xy).query(query)[1]

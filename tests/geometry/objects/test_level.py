@@ -1,0 +1,149 @@
+"""Points at a table's own level (level.py): a sparse cloud's table points left beside the
+objects' feet never join two objects, and go back to the object they lie against."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from supportnode.geometry.objects import detect_objects
+from supportnode.geometry.objects.level import LEVEL, height_above, nearest_object_point
+from supportnode.geometry.surfaces import Surface, SurfaceResult
+
+TABLE = 0.75
+SPACING = 0.012  # a sparsely sampled scene: a handful of points per 3 cm voxel
+
+
+def _table(normal=(0.0, 0.0, 1.0), band=(0.0, 0.01)) -> Surface:
+    ii, jj = np.meshgrid(np.arange(-10, 10), np.arange(-10, 10), indexing="ij")
+    cells = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)
+    n = np.asarray(normal, float)
+    return Surface(
+        id=0,
+        height=TABLE,
+        area=4.0,
+        centroid=np.array([0.0, 0.0, TABLE]),
+        normal=n / np.linalg.norm(n),
+        flatness=0.0,
+        bbox_min=np.array([-1.0, -1.0, TABLE]),
+        bbox_max=np.array([1.0, 1.0, TABLE]),
+        outline=[np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])],
+        point_count=0,
+        voxel_count=len(cells),
+        cells=cells,
+        cell_size=(0.1, 0.1),
+        band=band,
+    )
+
+
+def _box(lo, hi, rng) -> np.ndarray:
+    """Points on the five faces of a box seen from above (no bottom), one per SPACING^2."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    out = []
+    for axis in range(3):
+        other = [a for a in range(3) if a != axis]
+        area = np.prod(hi[other] - lo[other])
+        for end in (lo[axis], hi[axis]) if axis < 2 else (hi[axis],):
+            n = rng.poisson(area / SPACING**2)
+            f = np.empty((n, 3))
+            f[:, other] = rng.uniform(lo[other], hi[other], (n, 2))
+            f[:, axis] = end
+            out.append(f)
+    return np.concatenate(out)
+
+
+def _table_around(boxes, width: float, rng, dz: float = 0.0) -> np.ndarray:
+    """Table points within ``width`` of the boxes' feet, not under them: the surface leaves
+    them out (their voxels hold the boxes' feet), so they reach the objects as candidates."""
+    lo = np.min([b[0][:2] for b in boxes], axis=0) - width
+    hi = np.max([b[1][:2] for b in boxes], axis=0) + width
+    xy = rng.uniform(lo, hi, (rng.poisson(np.prod(hi - lo) / SPACING**2), 2))
+    under = np.zeros(len(xy), bool)
+    for b_lo, b_hi in boxes:
+        under |= np.all((xy >= np.asarray(b_lo[:2])) & (xy <= np.asarray(b_hi[:2])), axis=1)
+    xy = xy[~under]
+    return np.c_[xy, TABLE + rng.uniform(-dz, dz, len(xy))]
+
+
+def _detect(parts: list[np.ndarray], table: Surface):
+    pts = np.concatenate(parts)
+    res = detect_objects(pts, SurfaceResult([table], np.full(len(pts), -1, np.int32)))
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    return res, [res.labels[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+def _whole(lab: np.ndarray) -> int:
+    ids, counts = np.unique(lab, return_counts=True)
+    assert counts.max() >= 0.9 * len(lab), dict(zip(ids.tolist(), counts.tolist(), strict=True))
+    return int(ids[counts.argmax()])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_table_between_two_boxes_does_not_join_them(seed):
+    # 5 cm apart, the table between them left to the objects: the 3 cm voxels chain
+    # through it and, filled in, it leaves their joint footprint no neck to cut.
+    rng = np.random.default_rng(seed)
+    boxes = [
+        ((-0.1, -0.05, TABLE), (0.0, 0.05, TABLE + 0.1)),
+        ((0.05, -0.05, TABLE), (0.15, 0.05, TABLE + 0.1)),
+    ]
+    table = _table_around(boxes, 0.04, rng, dz=0.002)
+    res, (a, b, t) = _detect([*(_box(lo, hi, rng) for lo, hi in boxes), table], _table())
+    ia, ib = _whole(a), _whole(b)
+    assert ia != ib
+    assert len(res.clusters) == 2
+    # A table point goes to a box it lies against (beside one box, that one), or to none.
+    given = t >= 0
+    assert 0 < given.sum() < len(t)
+    assert set(t[given & (table[:, 0] < 0.0)]) == {ia}
+    assert set(t[given & (table[:, 0] > 0.05)]) == {ib}
+    assert res.stats["level_points"] >= len(table)  # and the boxes' lowest 3 mm
+
+
+def test_over_a_depth_cameras_band_nothing_is_set_aside():
+    rng = np.random.default_rng(2)
+    box = ((-0.05, -0.05, TABLE), (0.05, 0.05, TABLE + 0.1))
+    parts = [_box(*box, rng), _table_around([box], 0.03, rng)]
+    res, _ = _detect(parts, _table(band=(2.5, 0.002)))
+    assert res.stats["level_points"] == 0
+
+
+def test_a_small_objects_feet_count_towards_its_size():
+    # 25 points above the table's level and 10 at it: 35 >= min_points (30), one object.
+    rng = np.random.default_rng(3)
+    above = np.c_[rng.uniform(-0.02, 0.02, (25, 2)), rng.uniform(TABLE + 0.01, TABLE + 0.05, 25)]
+    feet = np.c_[rng.uniform(-0.02, 0.02, (10, 2)), np.full(10, TABLE + 0.001)]
+    res, (a, f) = _detect([above, feet], _table())
+    assert len(res.clusters) == 1
+    assert (a == 0).all() and (f == 0).all()
+
+
+def test_height_above_follows_a_tilted_plane():
+    table = _table(normal=(0.1, 0.0, 1.0))
+    x = np.array([-0.5, 0.0, 0.5, 0.5])
+    plane = TABLE - 0.1 * x
+    cp = np.c_[x, np.zeros(4), plane + np.array([0.0, 0.002, 0.01, -0.001])]
+    support = np.array([0, 0, 0, -1])
+    h = height_above(cp, support, [table])
+    assert np.allclose(h[:3], [0.0, 0.002, 0.01])
+    assert np.isnan(h[3])
+    assert (np.abs(h[:3]) <= LEVEL).tolist() == [True, True, False]
+
+
+def test_nearest_object_point_within_reach_only():
+    obj = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    q = np.array([[0.02, 0.0, 0.0], [1.0, 0.0, 0.0], [1.97, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    assert nearest_object_point(q, obj, 0.05).tolist() == [0, -1, 1, -1]
+    assert nearest_object_point(q[:0], obj, 0.05).shape == (0,)
+    assert nearest_object_point(q, obj[:0], 0.05).tolist() == [-1] * 4
+
+
+def test_candidates_all_at_the_tables_level_make_no_object():
+    # A sheet of paper on the table, left out by the surface: nothing to stand, no error.
+    rng = np.random.default_rng(4)
+    sheet = np.c_[rng.uniform(-0.1, 0.1, (200, 2)), TABLE + rng.uniform(-0.002, 0.002, 200)]
+    res, (lab,) = _detect([sheet], _table())
+    assert res.clusters == [] and (lab == -1).all()
+    assert res.stats["level_points"] == len(sheet)
