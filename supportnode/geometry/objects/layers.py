@@ -110,7 +110,7 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     """(P,) part of each point of the cluster p (P, 3), 0 for the one on the surface, or None
     when nothing in it stands on anything else. Higher levels first: a stack of three parts
     its top box, then the middle one."""
-    min_face = max(min_points // 2, 5)
+    min_face = _face_points(min_points)
     min_up = max(min_points, _MIN_SHARE * len(p))
     if not may_hold(p, _SLAB, clear, min_up, _BEYOND * min_face):
         return None  # most clusters: no level could show a face beyond what rises from it
@@ -119,7 +119,7 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     z, xy = q[:, 2], q[:, :2]
     bottom = _low_percentile(z, 1.0) if len(z) >= 100 else float(z[0])
     # The levels (horizontal faces' heights: peaks of the height histogram, at least
-    # min_points / 2 points within 1.5 _SLAB) from _MIN_TOP above the bottom up to a
+    # _face_points within 1.5 _SLAB) from _MIN_TOP above the bottom up to a
     # clearance below the top, highest first; each one's slab [a, b) of rows and first row
     # u above its clearance; and whether, with nothing cut yet, it is worth trying: enough
     # rises above it, and enough of it lies outside the box of what rises to show beyond it
@@ -188,7 +188,7 @@ def _rising_box(
     hi = xy[rows_up].max(axis=0) + _SLAB
     at = a + np.flatnonzero(mine[a:b])
     outside = ~np.all((xy[at] >= lo) & (xy[at] <= hi), axis=1)
-    if outside.sum() < _BEYOND * max(min_points // 2, 5):
+    if outside.sum() < _BEYOND * _face_points(min_points):
         return None
     return lo, hi, holder
 
@@ -214,7 +214,7 @@ def _cut_at(
     # A face: points at the level with nothing of the holder under them (a lidar's line
     # across a wall has the next line under it), flat around them (a sparse wall's, a
     # sphere's or a cone's points at that height have neighbours above and below).
-    min_face = max(min_points // 2, 5)
+    min_face = _face_points(min_points)
     face = at[~below.under(xy[at])]
     if len(face) < min_face:
         return []
@@ -224,10 +224,12 @@ def _cut_at(
     if len(face) < min_face:
         return []
     fxy = xy[face]
-    # A face wholly under what rises from it.
-    if np.all((fxy >= box[0]) & (fxy <= box[1]), axis=1).mean() > 1.0 - _BEYOND:
-        return []
     rows = u + np.flatnonzero(mine[u:])
+    # A face wholly under what rises from it: within its box, then (a box turned on the one
+    # under it fills its own box's corners, not the face's rim) within its hull.
+    if np.all((fxy >= box[0]) & (fxy <= box[1]), axis=1).mean() > 1.0 - _BEYOND:
+        if _inside(xy[rows], fxy, _SLAB).mean() > 1.0 - _BEYOND:
+            return []
     comp = _cluster_voxel(q[rows], 2.0 * clear, {})
     band_rows = np.flatnonzero(mine & (z > level + 1.5 * _SLAB) & (z <= level + clear))
     out = []
@@ -286,7 +288,7 @@ def _stands(
     top_half = q[z >= (z.min() + z.max()) / 2.0, :2]
     if np.ptp(top_half, axis=0).max() < _TAPER * base_width:
         return False
-    if _inside(fxy, base, _SLAB).mean() < _INSIDE:
+    if _inside(fxy, base, max(_SLAB, _spacing(fxy))).mean() < _INSIDE:
         return False
     # A laptop's screen rises flush with its base's back: its side goes on down.
     if below.under(base).mean() > _MAX_BESIDE:
@@ -307,3 +309,19 @@ def _inside(outline_xy: np.ndarray, xy: np.ndarray, margin: float) -> np.ndarray
         return np.ones(len(xy), bool)
     # Each facet: normal . x + offset <= 0 inside (unit normals).
     return np.all(xy @ hull.equations[:, :2].T + hull.equations[:, 2] <= margin, axis=1)
+
+
+def _face_points(min_points: int) -> int:
+    """The fewest points of a face: a third of an object's (a sampled map's box under a box
+    shows a rim of 15-25), and 5."""
+    return max(min_points // 3, 5)
+
+
+def _spacing(xy: np.ndarray) -> float:
+    """The typical distance (m) between neighbouring points of xy (K, 2) spread over their
+    hull: a sparse face's hull falls short of its edge by about that much."""
+    try:
+        area = ConvexHull(xy).volume
+    except (QhullError, ValueError):
+        return 0.0
+    return float(np.sqrt(area / len(xy)))

@@ -101,6 +101,35 @@ def test_a_box_on_a_box_is_two_objects_the_upper_on_the_lower():
     assert res.clusters[ia].surface_id == 0 and res.clusters[ib].surface_id == 0
 
 
+def _turned_box(centre, size, yaw_deg, z0, z1, rng) -> np.ndarray:
+    """A box (its four sides and top) of x, y ``size`` turned by yaw_deg about its centre."""
+    half = np.asarray(size, float) / 2.0
+    pts = _box((-half[0], -half[1], z0), (half[0], half[1], z1), rng)
+    a = np.radians(yaw_deg)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    pts[:, :2] = pts[:, :2] @ rot.T + np.asarray(centre)
+    return pts
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_box_turned_on_a_box_is_two_objects(seed):
+    # The upper box, turned 10 degrees, fills the corners of its own x, y box: most of the
+    # lower top that shows lies inside that box, though outside the upper box itself.
+    rng = np.random.default_rng(10 + seed)
+    lower = _box((-0.1, -0.075, TABLE), (0.1, 0.075, TABLE + 0.08), rng)
+    upper = _turned_box((0.0, 0.0), (0.16, 0.12), 10.0, TABLE + 0.08, TABLE + 0.15, rng)
+    top = lower[:, 2] > TABLE + 0.079  # the lower top the upper box does not cover
+    rot = np.radians(-10.0)
+    uxy = lower[:, :2] @ np.array([[np.cos(rot), -np.sin(rot)], [np.sin(rot), np.cos(rot)]]).T
+    covered = top & (np.abs(uxy[:, 0]) < 0.08) & (np.abs(uxy[:, 1]) < 0.06)
+    res, (a, b) = _detect([lower[~covered], upper])
+    ia = _whole(a)
+    # The upper box above its lowest centimetre (which lies in the lower top's slab).
+    ib = _whole(b[upper[:, 2] > TABLE + 0.09])
+    assert ia != ib
+    assert res.clusters[ib].supported_by == ia
+
+
 def test_a_sphere_in_a_low_bowl_is_its_own_object():
     rng = np.random.default_rng(1)
     base = _without(
