@@ -28,7 +28,15 @@ def _label(
     labels: np.ndarray,
     best: np.ndarray,
     nearer: bool,
-) -> None:
+) -> int:
+    # The input checked first, nothing written when it fails (1: a run outside the points,
+    # 2: a plane not finite): one loop over the runs, not six numpy passes and temporaries.
+    for p in range(first.size):
+        if first[p] < 0 or count[p] < 0 or first[p] + count[p] > lx.size:
+            return 1
+    for p in range(first.size):
+        if not (np.isfinite(a[p]) and np.isfinite(bx[p]) and np.isfinite(by[p])):
+            return 2
     for p in range(first.size):
         ap, bxp, byp, lab, t = a[p], bx[p], by[p], label[p], tol[p]
         for j in range(first[p], first[p] + count[p]):
@@ -38,6 +46,7 @@ def _label(
             if d <= t and not (nearer and labels[j] >= 0 and not d < abs(best[j])):
                 labels[j] = lab
                 best[j] = r
+    return 0
 
 
 def label_by_planes(
@@ -76,11 +85,9 @@ def label_by_planes(
     t = np.ascontiguousarray(tol, dtype=np.float64)
     if not (len(c) == len(f) == len(a) == len(bx) == len(by) == len(lab) == len(t)):
         raise ValueError("run and plane arrays must have one length")
-    if len(f) and ((f < 0).any() or (c < 0).any() or (f + c > n).any()):
-        raise ValueError("a run lies outside the points")
-    if not (np.isfinite(a).all() and np.isfinite(bx).all() and np.isfinite(by).all()):
-        raise ValueError("planes must be finite")
-    _label(lx, ly, lz, f, c, a, bx, by, lab, t, labels, best, bool(nearer))
+    bad = _label(lx, ly, lz, f, c, a, bx, by, lab, t, labels, best, bool(nearer))
+    if bad:
+        raise ValueError("a run lies outside the points" if bad == 1 else "planes must be finite")
 
 
 @warmer
