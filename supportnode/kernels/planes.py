@@ -63,7 +63,8 @@ def label_by_planes(
     """Label, in place, the points of P runs that lie within ``tol`` of a plane each.
 
     local: three (N,) float64 columns x, y, z, metres (a voxel grid's corner offsets); run p
-    covers points ``first[p] : first[p] + count[p]`` (runs do not overlap), its plane is
+    covers points ``first[p] : first[p] + count[p]`` (runs applied in order: a later
+    run overlapping an earlier one sees its labels), its plane is
     z = a + bx x + by y with ``plane = (a, bx, by)``, each (P,) float64. label: (P,) int,
     tol: (P,) float64 m. A point within tolerance takes the run's label into ``labels`` ((N,)
     int32) and its height above the plane into ``best`` ((N,) float64, signed); with
