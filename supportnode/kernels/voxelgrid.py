@@ -105,21 +105,12 @@ def _linear_keys(pts, size, origin, dims, top):
     n = pts.shape[0]
     lin = np.empty(n, np.int64)
     count = np.zeros(top + 1, np.int64)
-    # A run of points of one key counted in a register: neighbouring points mostly share
-    # their voxel, and a count through memory chains each increment on the last one's store.
-    last, run = np.int64(-1), 0
     for i in range(n):
         k = np.int64(0)
         for a in range(3):  # ((k0 - o0) * d1 + k1 - o1) * d2 + k2 - o2, as the numpy path
             k = k * dims[a] + (np.int64(np.floor(pts[i, a] / size[a])) - origin[a])
         lin[i] = k
-        if k != last:
-            if run:
-                count[last] += run
-            last, run = k, 0
-        run += 1
-    if run:
-        count[last] += run
+        count[k] += 1
     return lin, count
 
 
@@ -170,25 +161,18 @@ def _sort_points(pts, size, origin, dims, top):
     order = np.empty(n, np.int64)
     point_voxel = np.empty(n, np.int64)
     srt = np.empty((3, n))
-    last, j = np.int64(-1), np.int64(0)
     for i in range(n):
         # Each point's offsets written straight to its sorted place: reading the points in
-        # order and writing to one stream per voxel beats gathering them afterwards. The
-        # current voxel's next place is kept in a register (see _linear_keys).
-        k = lin[i]
-        if k != last:
-            if last >= 0:
-                fill[rank[last]] = j
-            last = k
-            j = fill[rank[k]]
-        v = rank[k]
+        # order and writing to one stream per voxel beats gathering them afterwards.
+        v = rank[lin[i]]
         point_voxel[i] = v
+        j = fill[v]
+        fill[v] = j + 1
         order[j] = i
         for a in range(3):
             # p - floor(p / size) * size with the voxel's corner; + 0.0 as there: a floor
             # of -0.0 (p = -0.0) gave +0.0, where p - 0.0 leaves -0.0.
             srt[a, j] = (pts[i, a] - corner[v, a]) + 0.0
-        j += 1
     return keys, counts, starts, order, point_voxel, srt
 
 
@@ -237,35 +221,30 @@ def _block_sums(srt, start, n, res, acc, val):
 
 
 @njit(cache=True, nogil=True)
-def _voxel_moments(srt, starts, counts, pairs, v, sums, outer, vec, acc):
-    """Voxel v's row of `_moments`; scratch reused between voxels: vec (3, 9), acc (9, 8)."""
-    first, res, val = vec[0], vec[1], vec[2]
-    s, n = starts[v], counts[v] - 1
-    _values(srt, s, first)
-    if n <= _BLOCK:
-        _block_sums(srt, s + 1, n, res, acc, val)
-    else:  # long runs: numpy splits them in halves, term by term
-        for a in range(3):
-            res[a] = _pairwise(srt[a], srt[a], s + 1, n, False)
-        for col in range(6):
-            res[3 + col] = _pairwise(srt[pairs[col, 0]], srt[pairs[col, 1]], s + 1, n, True)
-    for a in range(3):
-        sums[v, a] = first[a] + res[a]
-    for col in range(6):
-        outer[v, col] = first[3 + col] + res[3 + col]
-
-
-@njit(cache=True, nogil=True)
 def _moments(srt, starts, counts, pairs):
     """Per voxel, the sums (V, 3) and outer products (V, 6) as numpy.add.reduceat adds them:
     the first value, plus the pairwise sum of the others."""
     nv = starts.size
     sums = np.empty((nv, 3))
     outer = np.empty((nv, 6))
-    vec = np.empty((3, 9))
+    first = np.empty(9)
+    res = np.empty(9)
     acc = np.empty((9, 8))
+    val = np.empty(9)
     for v in range(nv):
-        _voxel_moments(srt, starts, counts, pairs, v, sums, outer, vec, acc)
+        s, n = starts[v], counts[v] - 1
+        _values(srt, s, first)
+        if n <= _BLOCK:
+            _block_sums(srt, s + 1, n, res, acc, val)
+        else:  # long runs: numpy splits them in halves, term by term
+            for a in range(3):
+                res[a] = _pairwise(srt[a], srt[a], s + 1, n, False)
+            for col in range(6):
+                res[3 + col] = _pairwise(srt[pairs[col, 0]], srt[pairs[col, 1]], s + 1, n, True)
+        for a in range(3):
+            sums[v, a] = first[a] + res[a]
+        for col in range(6):
+            outer[v, col] = first[3 + col] + res[3 + col]
     return sums, outer
 
 
