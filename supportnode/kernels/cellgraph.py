@@ -15,11 +15,10 @@ import numpy as np
 from numba import int64, njit, uint64
 
 from supportnode.kernels.runtime import warmer
+from supportnode.kernels.windows import add_rows, dense_columns
 
 GOLDEN = 0x9E3779B97F4A7C15
 MOMENTS = 10  # count, x, y, z, xx, yy, zz, xy, xz, yz
-# A dense table of the columns (window sums) only up to this many entries per cell.
-_DENSE_PER_CELL = 64
 
 # The 13 forward offsets of the 26-neighbourhood (dx, dy, dz) > (0, 0, 0): each adjacent
 # pair once (shared with the objects' voxel linking, `geometry.objects.neighbours`).
@@ -119,27 +118,6 @@ def _columns(ijk: np.ndarray, dims: np.ndarray) -> tuple:
 
 
 @njit(cache=True, nogil=True)
-def _dense_columns(ijk, start, cells, w):
-    """The columns' ids in a dense (i, j) table padded by ``w``: (table, i0, j0, width), -1
-    for no column; an empty table when the cells' box is too sparse for one."""
-    n = ijk.shape[0]
-    i0 = j0 = np.int64(1) << 62
-    i1 = j1 = -i0
-    for c in range(n):
-        i0, i1 = min(i0, ijk[c, 0]), max(i1, ijk[c, 0])
-        j0, j1 = min(j0, ijk[c, 1]), max(j1, ijk[c, 1])
-    width = j1 - j0 + 1 + 2 * w
-    rows = i1 - i0 + 1 + 2 * w
-    if n == 0 or rows * width > max(1 << 16, _DENSE_PER_CELL * n):
-        return np.empty(0, np.int32), 0, 0, 0
-    table = np.full(rows * width, -1, np.int32)
-    for q in range(start.size - 1):
-        c = cells[start[q]]
-        table[(ijk[c, 0] - i0 + w) * width + ijk[c, 1] - j0 + w] = q
-    return table, i0 - w, j0 - w, width
-
-
-@njit(cache=True, nogil=True)
 def _window_sums(
     ijk: np.ndarray,
     dims: np.ndarray,
@@ -155,7 +133,7 @@ def _window_sums(
     # a dense table where the cells' box allows one: a row of dy's columns then lies in one
     # or two cache lines, where each hashed lookup was a chain of dependent reads.
     tk, tv, shift, start, cells = _columns(ijk, dims)
-    dense, di, dj, width = _dense_columns(ijk, start, cells, w)
+    dense, di, dj, width = dense_columns(ijk, start, cells, w)
     out = np.zeros((at.size, mom.shape[1]))
     idx = np.empty((2 * w + 1) ** 3, np.int64)  # the cells of one window, in order
     for r in range(at.size):
@@ -186,39 +164,8 @@ def _window_sums(
                     if not same or label[j] == label[c]:
                         idx[n] = j
                         n += 1
-        _add_rows(mom, idx, n, out[r])
+        add_rows(mom, idx, n, out[r])
     return out
-
-
-@njit(cache=True, nogil=True)
-def _add_rows(mom, idx, n, row):
-    """row += rows idx[:n] of mom, one after the other; MOMENTS columns' sums in registers
-    (through the row in memory, each addition waited on the last one's store)."""
-    if mom.shape[1] != MOMENTS:
-        for t in range(n):
-            for e in range(mom.shape[1]):
-                row[e] += mom[idx[t], e]
-        return
-    s0, s1, s2, s3, s4 = row[0], row[1], row[2], row[3], row[4]
-    s5, s6, s7, s8, s9 = row[5], row[6], row[7], row[8], row[9]
-    for t in range(n):
-        j = idx[t]
-        s0, s1, s2, s3, s4 = (
-            s0 + mom[j, 0],
-            s1 + mom[j, 1],
-            s2 + mom[j, 2],
-            s3 + mom[j, 3],
-            s4 + mom[j, 4],
-        )
-        s5, s6, s7, s8, s9 = (
-            s5 + mom[j, 5],
-            s6 + mom[j, 6],
-            s7 + mom[j, 7],
-            s8 + mom[j, 8],
-            s9 + mom[j, 9],
-        )
-    row[0], row[1], row[2], row[3], row[4] = s0, s1, s2, s3, s4
-    row[5], row[6], row[7], row[8], row[9] = s5, s6, s7, s8, s9
 
 
 @njit(cache=True, nogil=True)
