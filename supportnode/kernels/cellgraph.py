@@ -15,6 +15,7 @@ import numpy as np
 from numba import int64, njit, uint64
 
 from supportnode.kernels.runtime import warmer
+from supportnode.kernels.windows import add_rows, dense_columns
 
 GOLDEN = 0x9E3779B97F4A7C15
 MOMENTS = 10  # count, x, y, z, xx, yy, zz, xy, xz, yz
@@ -128,26 +129,42 @@ def _window_sums(
 ) -> np.ndarray:
     # Per cell, the (2w + 1)^2 columns around it, each looked up once and its cells within w
     # in k read in ascending k: the same cells in the same order (dx, dy, dz ascending) as
-    # (2w + 1)^3 lookups of single cells, so the same sums to the bit.
+    # (2w + 1)^3 lookups of single cells, so the same sums to the bit. The columns come from
+    # a dense table where the cells' box allows one: a row of dy's columns then lies in one
+    # or two cache lines, where each hashed lookup was a chain of dependent reads.
     tk, tv, shift, start, cells = _columns(ijk, dims)
-    m = mom.shape[1]
-    out = np.zeros((at.size, m))
+    dense, di, dj, width = dense_columns(ijk, start, cells, w)
+    out = np.zeros((at.size, mom.shape[1]))
+    idx = np.empty((2 * w + 1) ** 3, np.int64)  # the cells of one window, in order
     for r in range(at.size):
         c = at[r]
         k_lo, k_hi = ijk[c, 2] - w, ijk[c, 2] + w
+        n = 0
         for dx in range(-w, w + 1):
             for dy in range(-w, w + 1):
-                q = _find(tk, tv, shift, (ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy)
+                if dense.size:
+                    q = dense[(ijk[c, 0] + dx - di) * width + ijk[c, 1] + dy - dj]
+                else:
+                    q = _find(tk, tv, shift, (ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy)
                 if q < 0:
                     continue
-                for t in range(start[q], start[q + 1]):
+                # From the column's first cell at k_lo or above, by bisection: a column
+                # holds several times the window's cells on an object's side.
+                lo, hi = start[q], start[q + 1]
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if ijk[cells[mid], 2] < k_lo:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                for t in range(lo, start[q + 1]):
                     j = cells[t]
-                    k = ijk[j, 2]
-                    if k > k_hi:
+                    if ijk[j, 2] > k_hi:
                         break
-                    if k >= k_lo and (not same or label[j] == label[c]):
-                        for e in range(m):
-                            out[r, e] += mom[j, e]
+                    if not same or label[j] == label[c]:
+                        idx[n] = j
+                        n += 1
+        add_rows(mom, idx, n, out[r])
     return out
 
 

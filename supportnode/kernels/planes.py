@@ -28,7 +28,15 @@ def _label(
     labels: np.ndarray,
     best: np.ndarray,
     nearer: bool,
-) -> None:
+) -> int:
+    # The input checked first, nothing written when it fails (1: a run outside the points,
+    # 2: a plane not finite): one loop over the runs, not six numpy passes and temporaries.
+    for p in range(first.size):
+        if first[p] < 0 or count[p] < 0 or first[p] + count[p] > lx.size:
+            return 1
+    for p in range(first.size):
+        if not (np.isfinite(a[p]) and np.isfinite(bx[p]) and np.isfinite(by[p])):
+            return 2
     for p in range(first.size):
         ap, bxp, byp, lab, t = a[p], bx[p], by[p], label[p], tol[p]
         for j in range(first[p], first[p] + count[p]):
@@ -38,6 +46,7 @@ def _label(
             if d <= t and not (nearer and labels[j] >= 0 and not d < abs(best[j])):
                 labels[j] = lab
                 best[j] = r
+    return 0
 
 
 def label_by_planes(
@@ -54,7 +63,8 @@ def label_by_planes(
     """Label, in place, the points of P runs that lie within ``tol`` of a plane each.
 
     local: three (N,) float64 columns x, y, z, metres (a voxel grid's corner offsets); run p
-    covers points ``first[p] : first[p] + count[p]`` (runs do not overlap), its plane is
+    covers points ``first[p] : first[p] + count[p]`` (runs applied in order: a later
+    run overlapping an earlier one sees its labels), its plane is
     z = a + bx x + by y with ``plane = (a, bx, by)``, each (P,) float64. label: (P,) int,
     tol: (P,) float64 m. A point within tolerance takes the run's label into ``labels`` ((N,)
     int32) and its height above the plane into ``best`` ((N,) float64, signed); with
@@ -76,11 +86,50 @@ def label_by_planes(
     t = np.ascontiguousarray(tol, dtype=np.float64)
     if not (len(c) == len(f) == len(a) == len(bx) == len(by) == len(lab) == len(t)):
         raise ValueError("run and plane arrays must have one length")
-    if len(f) and ((f < 0).any() or (c < 0).any() or (f + c > n).any()):
+    bad = _label(lx, ly, lz, f, c, a, bx, by, lab, t, labels, best, bool(nearer))
+    if bad:
+        raise ValueError("a run lies outside the points" if bad == 1 else "planes must be finite")
+
+
+@njit(cache=True, nogil=True)
+def _inliers(lx, ly, lz, first, count, rel, bx, by, tol):
+    n_in = np.zeros(first.size, np.int64)
+    for p in range(first.size):
+        r0, r1, r2, b0, b1, t = rel[p, 0], rel[p, 1], rel[p, 2], bx[p], by[p], tol[p]
+        m = 0
+        for j in range(first[p], first[p] + count[p]):
+            # As numpy's |o0 * bx + o1 * by + o2| of the offsets o from the plane's point.
+            m += abs((lx[j] - r0) * b0 + (ly[j] - r1) * b1 + (lz[j] - r2)) <= t
+        n_in[p] = m
+    return n_in
+
+
+def plane_inliers(
+    local: list[np.ndarray],
+    first: np.ndarray,
+    count: np.ndarray,
+    rel: np.ndarray,
+    slope: tuple[np.ndarray, np.ndarray],
+    tol: np.ndarray,
+) -> np.ndarray:
+    """(P,) int64: per run p (points ``first[p] : first[p] + count[p]`` of the three (N,)
+    float64 columns ``local``, metres), how many lie within ``tol[p]`` m (vertically) of the
+    plane through ``rel[p]`` (P, 3) with ``slope`` (bx, by), each (P,): |(x - rx) bx +
+    (y - ry) by + (z - rz)| <= tol. One pass over the runs' points, no (N,) temporaries.
+    Raises ValueError on shapes or runs outside the points."""
+    lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
+    if not len(lx) == len(ly) == len(lz):
+        raise ValueError("local columns must have one length")
+    f = np.ascontiguousarray(first, dtype=np.int64)
+    c = np.ascontiguousarray(count, dtype=np.int64)
+    r = np.ascontiguousarray(rel, dtype=np.float64).reshape(-1, 3)
+    bx, by = (np.ascontiguousarray(x, dtype=np.float64) for x in slope)
+    t = np.ascontiguousarray(tol, dtype=np.float64)
+    if not (len(c) == len(f) == len(r) == len(bx) == len(by) == len(t)):
+        raise ValueError("run and plane arrays must have one length")
+    if len(f) and ((f < 0).any() or (c < 0).any() or (f + c > len(lx)).any()):
         raise ValueError("a run lies outside the points")
-    if not (np.isfinite(a).all() and np.isfinite(bx).all() and np.isfinite(by).all()):
-        raise ValueError("planes must be finite")
-    _label(lx, ly, lz, f, c, a, bx, by, lab, t, labels, best, bool(nearer))
+    return _inliers(lx, ly, lz, f, c, r, bx, by, t)
 
 
 @warmer
@@ -90,3 +139,4 @@ def _warm() -> None:
     labels, best = np.full(2, -1, np.int32), np.empty(2)
     run = np.zeros(1, np.int64), np.full(1, 2, np.int64)
     label_by_planes(cols, *run, (one, one, one), np.zeros(1), np.full(1, 0.1), labels, best, True)
+    plane_inliers(cols, *run, np.zeros((1, 3)), (one, one), np.full(1, 0.1))

@@ -23,6 +23,11 @@ _PAIRS = np.array([[0, 0], [1, 1], [2, 2], [0, 1], [0, 2], [1, 2]], np.int64)
 @njit(cache=True, nogil=True)
 def _scan_voxels(x, y, z, size, lo, dims, pairs, mark, rank, lin, local):
     n = x.size
+    # Finite points only, checked here (before mark is touched) rather than by three numpy
+    # passes and their temporaries.
+    for i in range(n):
+        if not (math.isfinite(x[i]) and math.isfinite(y[i]) and math.isfinite(z[i])):
+            return None
     for i in range(n):
         kx = math.floor(x[i] / size)
         ky = math.floor(y[i] / size)
@@ -101,17 +106,16 @@ def scan_voxels(
     n = len(x)
     if not (len(y) == n == len(z)):
         raise ValueError("the three columns must have one length")
-    if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(z).all()):
-        raise ValueError("points must be finite (the map drops the others first)")
     mark, rank, lin, local = scratch
     top = float(np.prod(dims))
     if len(mark) < top or len(rank) < top or len(lin) < n or local.shape[1] < n:
         raise ValueError("scratch arrays smaller than the box or the scan")
     lo = np.asarray(lo, np.float64)
     dims = np.asarray(dims, np.float64)
-    keys, voxel, counts, moments = _scan_voxels(
-        x, y, z, float(size), lo, dims, _PAIRS, mark, rank, lin, local
-    )
+    found = _scan_voxels(x, y, z, float(size), lo, dims, _PAIRS, mark, rank, lin, local)
+    if found is None:
+        raise ValueError("points must be finite (the map drops the others first)")
+    keys, voxel, counts, moments = found
     return keys, voxel, counts, moments, [local[0, :n], local[1, :n], local[2, :n]]
 
 

@@ -27,16 +27,30 @@ _PAIRS = np.array([[0, 0], [1, 1], [2, 2], [0, 1], [0, 2], [1, 2]], np.int64)
 
 @njit(cache=True, nogil=True)
 def _key_range(pts, size):
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    finite = True
+    # The least and greatest coordinates, then their keys: x / s and its floor are monotonic
+    # in x (IEEE division rounds monotonically), so the extreme keys are the extreme points'
+    # keys: two divisions per axis, not one per point. Six scalar chains, not one through
+    # an array per axis: the loop is bound by their latency.
+    x0 = y0 = z0 = np.inf
+    x1 = y1 = z1 = -np.inf
+    bad = 0.0
     for i in range(pts.shape[0]):
-        for a in range(3):
-            k = np.floor(pts[i, a] / size[a])
-            if not math.isfinite(k):
-                finite = False
-            lo[a] = min(lo[a], k)
-            hi[a] = max(hi[a], k)
+        x, y, z = pts[i, 0], pts[i, 1], pts[i, 2]
+        bad += (x - x) + (y - y) + (z - z)  # NaN from then on once a value is NaN or inf
+        x0, x1 = min(x0, x), max(x1, x)
+        y0, y1 = min(y0, y), max(y1, y)
+        z0, z1 = min(z0, z), max(z1, z)
+    lo = np.array([x0, y0, z0])
+    hi = np.array([x1, y1, z1])
+    finite = bad == 0.0
+    if pts.shape[0] == 0:
+        return lo, hi, finite
+    for a in range(3):
+        # Both ends' keys, ordered: a negative size would turn them round.
+        k0, k1 = np.floor(lo[a] / size[a]), np.floor(hi[a] / size[a])
+        lo[a], hi[a] = min(k0, k1), max(k0, k1)
+        # A quotient that overflows (or a NaN size) shows at the ends.
+        finite = finite and math.isfinite(k0) and math.isfinite(k1)
     return lo, hi, finite
 
 
@@ -86,22 +100,29 @@ def _pairwise(a, b, start, n, product):
 
 
 @njit(cache=True, nogil=True)
-def _sort_points(pts, size, origin, dims, top):
-    """Each point's voxel rank, the voxels' keys (V, 3) and counts, the points' order (a
-    stable counting sort by voxel) and their offsets from the corner, in that order."""
+def _linear_keys(pts, size, origin, dims, top):
+    """Each point's linear key (N,) and the points per key (top + 1,)."""
     n = pts.shape[0]
     lin = np.empty(n, np.int64)
-    rank = np.zeros(top + 1, np.int64)
+    count = np.zeros(top + 1, np.int64)
     for i in range(n):
         k = np.int64(0)
         for a in range(3):  # ((k0 - o0) * d1 + k1 - o1) * d2 + k2 - o2, as the numpy path
             k = k * dims[a] + (np.int64(np.floor(pts[i, a] / size[a])) - origin[a])
         lin[i] = k
-        rank[k] += 1
+        count[k] += 1
+    return lin, count
+
+
+@njit(cache=True, nogil=True)
+def _ranks(rank, size, origin, dims):
+    """The occupied keys of the counts per key ``rank`` (top + 1,), which become each key's
+    voxel: their keys (V, 3), corners (V, 3) m, counts and starts (V,)."""
     nv = 0
-    for k in range(top + 1):
+    for k in range(rank.size):
         nv += rank[k] > 0
     keys = np.empty((nv, 3), np.int64)
+    corner = np.empty((nv, 3))
     counts = np.empty(nv, np.int64)
     starts = np.empty(nv, np.int64)
     v = 0
@@ -117,13 +138,25 @@ def _sort_points(pts, size, origin, dims, top):
                     keys[v, 0] = i0 + origin[0]
                     keys[v, 1] = i1 + origin[1]
                     keys[v, 2] = i2 + origin[2]
+                    for a in range(3):  # floor(p / size) * size of its points, exactly
+                        corner[v, a] = np.float64(keys[v, a]) * size[a]
                     counts[v], starts[v] = c, at
                     at += c
                     rank[k] = v
                     v += 1
                 k += 1
-    fill = np.empty(nv, np.int64)
-    for v in range(nv):  # loops, not slice copies: those compile for seconds
+    return keys, corner, counts, starts
+
+
+@njit(cache=True, nogil=True)
+def _sort_points(pts, size, origin, dims, top):
+    """Each point's voxel rank, the voxels' keys (V, 3) and counts, the points' order (a
+    stable counting sort by voxel) and their offsets from the corner, in that order."""
+    n = pts.shape[0]
+    lin, rank = _linear_keys(pts, size, origin, dims, top)
+    keys, corner, counts, starts = _ranks(rank, size, origin, dims)
+    fill = np.empty(counts.size, np.int64)
+    for v in range(counts.size):  # loops, not slice copies: those compile for seconds
         fill[v] = starts[v]
     order = np.empty(n, np.int64)
     point_voxel = np.empty(n, np.int64)
@@ -137,7 +170,9 @@ def _sort_points(pts, size, origin, dims, top):
         fill[v] = j + 1
         order[j] = i
         for a in range(3):
-            srt[a, j] = pts[i, a] - np.floor(pts[i, a] / size[a]) * size[a]
+            # p - floor(p / size) * size with the voxel's corner; + 0.0 as there: a floor
+            # of -0.0 (p = -0.0) gave +0.0, where p - 0.0 leaves -0.0.
+            srt[a, j] = (pts[i, a] - corner[v, a]) + 0.0
     return keys, counts, starts, order, point_voxel, srt
 
 
@@ -245,4 +280,5 @@ def _warm() -> None:
     pts[:, 2] = np.linspace(0.0, 0.04, 12)
     size = np.array([0.1, 0.1, 0.05])
     lo, hi, _ = key_range(pts, size)
-    voxel_grid(pts, size, lo.astype(np.int64), (hi - lo).astype(np.int64) + 1)
+    origin, dims = lo.astype(np.int64), (hi - lo).astype(np.int64) + 1
+    voxel_grid(pts, size, origin, dims)

@@ -104,13 +104,10 @@ class ScanVoxelizer(StoreState):
         itself."""
         size = self.size
         n = len(cols[0])
-        # Float keys, then offsets from the corner (below), in buffers kept across scans.
-        kcols = []
-        for a, c in enumerate(cols):  # three axes
-            kc = np.divide(c, size, out=self._buffer(f"key{a}", n, np.float64))
-            kcols.append(np.floor(kc, out=kc))
-        lo = np.array([c.min() for c in kcols])
-        hi = np.array([c.max() for c in kcols])
+        # The keys' extremes are the extreme coordinates' keys (x / size and its floor are
+        # monotonic in x): no (N,) pass of keys unless the numpy path below needs them.
+        lo = np.floor(np.array([float(c.min()) for c in cols]) / size)
+        hi = np.floor(np.array([float(c.max()) for c in cols]) / size)
         far = max(np.abs(lo).max(), np.abs(hi).max()) >= 2**40
         dims = (hi - lo + 1.0) if not far else np.full(3, np.inf)
         if float(np.prod(dims)) >= 2.0**53:  # linear keys not exact in float64
@@ -124,6 +121,11 @@ class ScanVoxelizer(StoreState):
                 cols, size, lo, dims, self._scan_scratch(n, int(np.prod(dims)))
             )
             return _ScanGrid(keys, counts, None, moments, local, voxel)
+        # Float keys, then offsets from the corner, in buffers kept across scans.
+        kcols = []
+        for a, c in enumerate(cols):  # three axes
+            kc = np.divide(c, size, out=self._buffer(f"key{a}", n, np.float64))
+            kcols.append(np.floor(kc, out=kc))
         return self._voxelize_large(cols, kcols, lo, dims)
 
     def _voxelize_large(

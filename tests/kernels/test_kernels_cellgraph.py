@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from supportnode.kernels import runtime
-from supportnode.kernels.cellgraph import CellGrid, _warm, bin_points
+from supportnode.kernels.cellgraph import MOMENTS, CellGrid, _warm, bin_points
 
 
 def _cells(seed: int, n: int, span: int, pad: int) -> tuple[np.ndarray, np.ndarray]:
@@ -51,6 +51,31 @@ def test_adjacent_pairs_are_every_26_neighbour_pair_once(n, span, seed):
     d = np.abs(ijk[:, None, :] - ijk[None, :, :]).max(axis=2)
     want = {(a, b) for a, b in zip(*np.nonzero(np.triu(d == 1)), strict=True)}
     assert got == want
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(1, 60), sparse=st.booleans(), w=st.integers(0, 3), seed=st.integers(0, 10_000))
+def test_window_sums_of_moments_in_window_order_to_the_bit(n, sparse, w, seed):
+    # MOMENTS columns (summed in registers), on a dense box and on a sparse one (two
+    # clusters far apart: the hashed column lookups), each cell's window in lookup order.
+    ijk, dims = _cells(seed, n, 4, 3)
+    if sparse:
+        ijk[::2] += 5000
+        dims = dims + 5000
+    rng = np.random.default_rng(seed + 1)
+    mom = rng.normal(size=(len(ijk), MOMENTS))
+    label = rng.integers(0, 2, len(ijk))
+    got = CellGrid(ijk, dims, 3).window_sums(mom, w, label)
+    where = {tuple(c): i for i, c in enumerate(ijk.tolist())}
+    for c in range(len(ijk)):
+        acc = np.zeros(MOMENTS)
+        for dx in range(-w, w + 1):
+            for dy in range(-w, w + 1):
+                for dz in range(-w, w + 1):
+                    j = where.get((ijk[c, 0] + dx, ijk[c, 1] + dy, ijk[c, 2] + dz))
+                    if j is not None and label[j] == label[c]:
+                        acc += mom[j]
+        np.testing.assert_array_equal(got[c], acc)
 
 
 @settings(max_examples=40, deadline=None)

@@ -43,6 +43,38 @@ def test_moments_match_numpy_grouping(n, size, offset, seed):
         np.testing.assert_allclose(cov, w_cov, rtol=0, atol=1e-9)
 
 
+def _sums_in_order(points: np.ndarray, size: float) -> np.ndarray:
+    """The kernel's sums (V, 13), voxel by first point, each added point by point in order
+    (first point, offsets' sums, products' sums, count): what the bits must be."""
+    rows: dict[tuple, list[float]] = {}
+    inv = 1.0 / size
+    for x, y, z in points.tolist():
+        f = (x * inv, y * inv, z * inv)
+        if not all(abs(c) < 2.0**52 for c in f):
+            continue
+        row = rows.setdefault(tuple(int(np.floor(c)) for c in f), [x, y, z] + [0.0] * 10)
+        dx, dy, dz = x - row[0], y - row[1], z - row[2]
+        for q, term in enumerate((dx, dy, dz, dx * dx, dy * dy, dz * dz, dx * dy, dx * dz,
+                                  dy * dz, 1.0)):  # fmt: skip
+            row[3 + q] += term
+    return np.array(list(rows.values())).reshape(-1, 13)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 3000), runs=st.booleans(), seed=st.integers(0, 10_000))
+def test_sums_are_added_point_by_point_in_order(n, runs, seed):
+    from supportnode.kernels.downsample import _sums
+
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(rng.uniform(-100, 100), rng.uniform(0.01, 3.0), (n, 3))
+    if runs:  # an image's neighbouring pixels: runs of one voxel, voxels seen again
+        pts = pts[np.argsort(np.floor(pts[:, 0] / 0.05), kind="stable")]
+    pts[rng.random(n) < 0.05] = np.nan
+    want = _sums_in_order(pts, 0.05)
+    got = _sums(np.ascontiguousarray(pts), 1.0 / 0.05)
+    assert got.shape == want.shape and np.array_equal(got, want)
+
+
 def test_many_voxels_grow_the_table_and_keep_first_seen_order():
     pts = np.column_stack([np.arange(5000) * 0.1 + 0.05, np.zeros(5000), np.zeros(5000)])
     counts, centroids, _ = voxel_moments(pts, 0.1)  # 5000 voxels: the table grows 3 times

@@ -90,3 +90,34 @@ def test_bad_input_is_rejected_before_the_loop():
 def test_warm_up_is_registered():
     assert _warm in runtime._WARMERS
     _warm()
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 300), runs=st.integers(0, 12), seed=st.integers(0, 10_000))
+def test_plane_inliers_count_as_numpys_vectorised_test(n, runs, seed):
+    from supportnode.kernels.planes import plane_inliers
+
+    rng = np.random.default_rng(seed)
+    local = [rng.uniform(0, 0.1, n), rng.uniform(0, 0.1, n), rng.normal(0.02, 0.01, n)]
+    cuts = np.sort(rng.integers(0, n + 1, 2 * runs))
+    first, count = cuts[0::2], cuts[1::2] - cuts[0::2]
+    rel = rng.normal(0.03, 0.02, (runs, 3))
+    bx, by, tol = rng.normal(0, 0.1, runs), rng.normal(0, 0.1, runs), rng.uniform(0, 0.02, runs)
+    got = plane_inliers(local, first, count, rel, (bx, by), tol)
+    pos = np.concatenate([np.arange(f, f + c) for f, c in zip(first, count, strict=True)] or [[]])
+    pos = pos.astype(np.int64)
+    off = [local[a][pos] - np.repeat(rel[:, a], count) for a in range(3)]
+    dist = np.abs(off[0] * np.repeat(bx, count) + off[1] * np.repeat(by, count) + off[2])
+    inlier = (dist <= np.repeat(tol, count)).astype(np.int64)
+    starts = np.cumsum(count) - count
+    want = np.array([inlier[s : s + c].sum() for s, c in zip(starts, count, strict=True)])
+    np.testing.assert_array_equal(got, want.astype(np.int64).reshape(-1))
+
+
+def test_plane_inliers_refuse_runs_outside_the_points():
+    from supportnode.kernels.planes import plane_inliers
+
+    cols = [np.zeros(2)] * 3
+    one = np.zeros(1)
+    with pytest.raises(ValueError, match="outside"):
+        plane_inliers(cols, np.zeros(1), np.full(1, 3), np.zeros((1, 3)), (one, one), one)

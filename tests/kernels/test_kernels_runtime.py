@@ -64,3 +64,15 @@ def test_two_threads_in_parallel_kernels_do_not_abort_even_with_workqueue_asked(
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.strip() in {"omp", "tbb"}
+
+
+def test_keep_freed_memory_takes_on_glibc_and_is_a_no_op_elsewhere():
+    """Fixed allocator thresholds (a scan's arrays reuse the last scan's pages); False where
+    there is no glibc mallopt, never an error."""
+    import platform
+
+    took = runtime.keep_freed_memory()
+    if sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc":
+        assert took
+    else:
+        assert took is False

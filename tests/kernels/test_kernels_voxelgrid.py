@@ -82,3 +82,17 @@ def test_key_range_and_warm_up():
                                np.array([0.1, 0.1, 0.1]))  # fmt: skip
     assert lo.tolist() == [0.0, -1.0, -1.0] and hi.tolist() == [3.0, 2.0, 0.0] and finite
     assert _warm in runtime._WARMERS
+
+
+def test_signed_zeros_and_overflowing_keys():
+    # -0.0 floors to -0.0, whose corner offset numpy computes as +0.0: the same sign here.
+    pts = np.array([[-0.0, 0.0, -0.0], [0.0, -0.0, 0.01], [-5e-324, 0.02, 0.0]])
+    size = np.array([0.1, 0.1, 2.0])
+    got, want = voxelize(pts, size), _voxelize_numpy(pts, size)
+    _assert_same(got, want)
+    for x, y in zip(got.local, want.local, strict=True):
+        assert np.array_equal(np.signbit(x), np.signbit(y))
+    # Finite points whose keys overflow float64 are not finite keys.
+    assert not key_range(np.array([[1e308, 0.0, 0.0]]), np.full(3, 1e-10))[2]
+    lo, hi, finite = key_range(np.array([[0.05, -0.25, 0.0]]), np.array([-0.1, 0.1, 0.1]))
+    assert lo.tolist() == [-1.0, -3.0, 0.0] and hi.tolist() == [-1.0, -3.0, 0.0] and finite

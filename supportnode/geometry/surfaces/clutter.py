@@ -92,22 +92,17 @@ def _fits(
     over the cell and level (0 for a failed trial): every point of each candidate voxel
     ``dst`` against the plane beside it, read from the grid's contiguous corner-relative
     columns (1-D gathers of runs)."""
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.planes import plane_inliers
+
     n_pts = grid.counts[dst]
-    first = np.cumsum(n_pts) - n_pts
-    rank = np.arange(n_pts.sum()) - np.repeat(first, n_pts)
-    pos = np.repeat(grid.starts[dst], n_pts) + rank
     # The plane's point relative to the candidate voxel's corner, then per point.
     rel = planes.mean[src] - grid.keys[dst] * grid.size
     nrm = planes.normal[src]
-    # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
-    off = [grid.local[a][pos] - np.repeat(rel[:, a], n_pts) for a in range(3)]
-    dist = np.abs(
-        off[0] * np.repeat(nrm[:, 0] / nrm[:, 2], n_pts)
-        + off[1] * np.repeat(nrm[:, 1] / nrm[:, 2], n_pts)
-        + off[2]
-    )
-    inlier = dist <= np.repeat(tolerance[surface_of_voxel[src]], n_pts)
-    n_in = np.add.reduceat(inlier.astype(np.int64), first)
+    bx, by = nrm[:, 0] / nrm[:, 2], nrm[:, 1] / nrm[:, 2]
+    tol = tolerance[surface_of_voxel[src]]
+    # Counted in one compiled pass over the trials' points (most trials fail here).
+    n_in = plane_inliers(grid.local, grid.starts[dst], n_pts, rel, (bx, by), tol)
     out = np.zeros(len(dst), dtype=np.int64)
     # The spread and level tests only for the trials with inliers enough (a few in ten).
     sel = np.flatnonzero((n_in > params.p_min) & (n_in >= params.absorb_min_fraction * n_pts))
@@ -115,9 +110,12 @@ def _fits(
         return out
     n_sel = n_pts[sel]
     first_sel = np.cumsum(n_sel) - n_sel
-    at = np.repeat(first[sel] - first_sel, n_sel) + np.arange(n_sel.sum())
-    off = [o[at] for o in off]
-    spread, level = _spread_level(off, inlier[at], first_sel, n_in[sel], params)
+    pos = np.repeat(grid.starts[dst[sel]] - first_sel, n_sel) + np.arange(n_sel.sum())
+    # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
+    off = [grid.local[a][pos] - np.repeat(rel[sel, a], n_sel) for a in range(3)]
+    dist = np.abs(off[0] * np.repeat(bx[sel], n_sel) + off[1] * np.repeat(by[sel], n_sel) + off[2])
+    inlier = dist <= np.repeat(tol[sel], n_sel)
+    spread, level = _spread_level(off, inlier, first_sel, n_in[sel], params)
     out[sel] = np.where(spread & level, n_in[sel], 0)
     return out
 

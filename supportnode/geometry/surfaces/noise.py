@@ -52,11 +52,14 @@ def fit_noise(
     rb = np.zeros(len(surface), np.int64) if r is None else np.floor(r / _BIN).astype(np.int64)
     nb = int(rb.max()) + 1
     key = surface.astype(np.int64) * nb + rb
-    order = np.lexsort((residual, key))
+    order = np.argsort(key, kind="stable")
     key, res = key[order], residual[order]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
     counts = np.diff(np.r_[starts, len(key)])
-    med = res[starts + counts // 2]
+    # Each bin's middle residual in sorted order, selected rather than sorted (a lexsort by
+    # bin and residual took 4x as long on a scan's sample): the same value.
+    bins = zip(starts.tolist(), counts.tolist(), strict=True)
+    med = np.array([np.partition(res[s : s + c], c // 2)[c // 2] for s, c in bins])
     sid, bin_ = key[starts] // nb, key[starts] % nb
     var = (_MAD_TO_SIGMA * med) ** 2
     r4 = ((bin_ + 0.5) * _BIN) ** 4

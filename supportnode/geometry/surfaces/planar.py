@@ -261,22 +261,15 @@ def _label_points_planar(
     # above is one (ascending, as keys + 1 in z keep the voxels' order).
     up, down = index.neighbours_many(sv, [(0, 0, 1), (0, 0, -1)], grid.keys)
     # Work in the grid's voxel order on its corner-relative columns: contiguous, no gathers.
-    for dz in (0, -1, 1):  # three column neighbours, each one compiled loop over the points
-        if dz == 0:
-            vsel = sv
-            t = sv
-        else:
-            hit = up if dz < 0 else down
-            on = hit >= 0
-            vsel, t = hit[on], sv[on]
-            if len(vsel) == 0:
-                continue
-        surf_v = surface_of_voxel[t]
-        tol = tol_by_comp[surf_v]
-        if band is not None:
-            tol = band(surf_v, vsel)
-        # A labelled point changes surface only for a nearer plane.
-        _label_by_plane_of(grid, planes, t, vsel, surf_v, tol, sorted_labels, best, dz != 0)
+    # The three column neighbours (the voxel itself, the one above, the one below) in one
+    # compiled loop, in that order: a labelled point changes surface only for a nearer plane
+    # (the first pass finds none labelled: its voxels are distinct).
+    on_up, on_down = up >= 0, down >= 0
+    vsel = np.concatenate([sv, up[on_up], down[on_down]])
+    t = np.concatenate([sv, sv[on_up], sv[on_down]])
+    surf_v = surface_of_voxel[t]
+    tol = tol_by_comp[surf_v] if band is None else band(surf_v, vsel)
+    _label_by_plane_of(grid, planes, t, vsel, surf_v, tol, sorted_labels, best, True)
     return sorted_labels, best
 
 
