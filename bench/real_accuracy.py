@@ -216,6 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     load0 = os.getloadavg()
     params = load_config(None, args.set)
     runtime.warm()
+    runtime.keep_freed_memory()  # as `supportnode detect` runs
     try:
         import open3d  # noqa: F401
 

@@ -101,6 +101,7 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart,
         # so that the stage timings are the work on this cloud.
         kernels_time = runtime.warm()
+        runtime.keep_freed_memory()  # this process's: the stages reuse freed pages
         t = time.perf_counter()
         cloud, unit, guess = _read(args.cloud, args.units)
         read_time = time.perf_counter() - t

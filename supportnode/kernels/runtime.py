@@ -38,7 +38,9 @@ def keep_freed_memory() -> bool:
     that threshold as it goes: depending on the process's history, every scan then faults
     in its arrays' pages again (up to ~3000 faults a 640 x 480 scan, ~1.7 us each on a VM:
     5 ms, 10 % of the detection) or none. Fixed thresholds keep the pages: the process keeps
-    its peak memory instead. No-op off glibc."""
+    its peak memory instead. No-op off glibc. Process-wide: called by the processes that are
+    supportnode's (the node's `warm_up`, ``supportnode detect``), never by the library on its
+    own (a planner importing supportnode keeps its allocator as it set it)."""
     if not sys.platform.startswith("linux"):
         return False
     try:
@@ -53,8 +55,7 @@ def keep_freed_memory() -> bool:
 
 
 def configure(threads: int | None = None) -> str:
-    """Choose the threading layer and the number of threads of parallel kernels; keep freed
-    memory (`keep_freed_memory`) for the next scans.
+    """Choose the threading layer and the number of threads of parallel kernels.
 
     numba's built-in ``workqueue`` layer aborts when two Python threads enter parallel kernels
     at once, and the node runs two threads: ask for a thread-safe layer (OpenMP or TBB). Where
@@ -70,7 +71,6 @@ def configure(threads: int | None = None) -> str:
     with _LOCK:
         if not _configured:
             config.THREADING_LAYER = "threadsafe"
-            keep_freed_memory()
             _configured = True
         if threads is not None:
             numba.set_num_threads(max(1, min(int(threads), config.NUMBA_NUM_THREADS)))

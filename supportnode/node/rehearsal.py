@@ -87,5 +87,6 @@ def warm_up(params: DetectParams, threads: int | None = None) -> float:
     from supportnode.kernels import runtime
 
     runtime.configure(threads)
+    runtime.keep_freed_memory()  # the node's process: each scan reuses the last one's pages
     took = runtime.warm() + rehearse(params)
     return took + runtime.warm()
