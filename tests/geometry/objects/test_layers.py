@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from sparse_scenes import box_faces, table_surface
 
 from supportnode.geometry.objects import detect_objects
 from supportnode.geometry.surfaces import Surface, SurfaceResult
@@ -19,40 +20,11 @@ SPACING = 0.02  # a sparsely sampled scene: a few points per 3 cm voxel
 
 
 def _table() -> Surface:
-    ii, jj = np.meshgrid(np.arange(-10, 10), np.arange(-10, 10), indexing="ij")
-    cells = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)
-    return Surface(
-        id=0,
-        height=TABLE,
-        area=4.0,
-        centroid=np.array([0.0, 0.0, TABLE]),
-        normal=np.array([0.0, 0.0, 1.0]),
-        flatness=0.0,
-        bbox_min=np.array([-1.0, -1.0, TABLE]),
-        bbox_max=np.array([1.0, 1.0, TABLE]),
-        outline=[np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])],
-        point_count=0,
-        voxel_count=len(cells),
-        cells=cells,
-        cell_size=(0.1, 0.1),
-    )
+    return table_surface(TABLE)
 
 
 def _box(lo, hi, rng) -> np.ndarray:
-    """Points uniformly on the five faces of a box seen from above (no bottom), about one
-    per SPACING^2."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    out = []
-    for axis in range(3):
-        other = [a for a in range(3) if a != axis]
-        area = np.prod(hi[other] - lo[other])
-        for end in (lo[axis], hi[axis]) if axis < 2 else (hi[axis],):
-            n = rng.poisson(area / SPACING**2)
-            f = np.empty((n, 3))
-            f[:, other] = rng.uniform(lo[other], hi[other], (n, 2))
-            f[:, axis] = end
-            out.append(f)
-    return np.concatenate(out)
+    return box_faces(lo, hi, rng, SPACING)
 
 
 def _sphere(centre, r, rng) -> np.ndarray:
