@@ -3,6 +3,8 @@ surface detection) and boxes sampled on their faces, a few points per 3 cm voxel
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from supportnode.geometry.surfaces import Surface
@@ -49,3 +51,22 @@ def box_faces(lo, hi, rng: np.random.Generator, spacing: float) -> np.ndarray:
             f[:, axis] = end
             out.append(f)
     return np.concatenate(out)
+
+
+def detect_parts(parts: list[np.ndarray], table: Surface):
+    """detect_objects on the parts' points over ``table`` (all of them candidates): the
+    result and each part's labels."""
+    from supportnode.geometry.objects import detect_objects
+    from supportnode.geometry.surfaces import SurfaceResult
+
+    pts = np.concatenate(parts)
+    res = detect_objects(pts, SurfaceResult([table], np.full(len(pts), -1, np.int32)))
+    bounds = np.cumsum([0] + [len(p) for p in parts])
+    return res, [res.labels[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+def whole(lab: np.ndarray) -> int:
+    """The one cluster holding (nearly, 90 %) all of a part's points."""
+    ids, counts = np.unique(lab, return_counts=True)
+    assert counts.max() >= 0.9 * len(lab), dict(zip(ids.tolist(), counts.tolist(), strict=True))
+    return int(ids[counts.argmax()])

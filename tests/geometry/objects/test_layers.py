@@ -3,16 +3,13 @@ bowl are two objects; one box, a laptop, a cone, a lamp, two boxes side by side 
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sparse_scenes import box_faces, table_surface
+from sparse_scenes import box_faces, detect_parts, table_surface, whole
 
-from supportnode.geometry.objects import detect_objects
-from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.layers import screen_levels
 
 TABLE = 0.75
@@ -48,17 +45,7 @@ def _without(p: np.ndarray, lo, hi) -> np.ndarray:
 
 
 def _detect(parts: list[np.ndarray]):
-    pts = np.concatenate(parts)
-    res = detect_objects(pts, SurfaceResult([_table()], np.full(len(pts), -1, np.int32)))
-    bounds = np.cumsum([0] + [len(p) for p in parts])
-    return res, [res.labels[a:b] for a, b in itertools.pairwise(bounds)]
-
-
-def _whole(lab: np.ndarray) -> int:
-    """The one cluster holding (nearly) all of a part's points."""
-    ids, counts = np.unique(lab, return_counts=True)
-    assert counts.max() >= 0.9 * len(lab), dict(zip(ids.tolist(), counts.tolist(), strict=True))
-    return int(ids[counts.argmax()])
+    return detect_parts(parts, _table())
 
 
 def test_a_box_on_a_box_is_two_objects_the_upper_on_the_lower():
@@ -67,7 +54,7 @@ def test_a_box_on_a_box_is_two_objects_the_upper_on_the_lower():
     lower = _without(_box((-0.1, -0.075, TABLE), lower_hi, rng), (-0.06, -0.05, 0), (0.06, 0.05, 1))
     upper = _box((-0.06, -0.05, TABLE + 0.08), (0.06, 0.05, TABLE + 0.14), rng)
     res, (a, b) = _detect([lower, upper])
-    ia, ib = _whole(a), _whole(b)
+    ia, ib = whole(a), whole(b)
     assert ia != ib
     assert res.clusters[ib].supported_by == ia
     assert res.clusters[ia].surface_id == 0 and res.clusters[ib].surface_id == 0
@@ -83,7 +70,7 @@ def test_a_sphere_in_a_low_bowl_is_its_own_object():
     ball = _sphere((0.0, 0.0, TABLE + 0.05 + 0.045), 0.045, rng)
     ball = ball[ball[:, 2] > TABLE + 0.052]  # the cap inside the box's top is hidden
     _, (a, b) = _detect([base, ball])
-    assert _whole(a) != _whole(b)
+    assert whole(a) != whole(b)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -93,8 +80,8 @@ def test_one_box_one_cone_one_sphere_are_not_cut(seed):
     cone = _cone((0.0, 0.0), 0.08, 0.2, rng)
     ball = _sphere((0.5, 0.0, TABLE + 0.1), 0.1, rng)
     res, labs = _detect([box, cone, ball])
-    whole = [_whole(lab) for lab in labs]
-    assert len(set(whole)) == 3
+    ids = [whole(lab) for lab in labs]
+    assert len(set(ids)) == 3
     assert res.stats["layer_splits"] == 0
 
 
@@ -110,7 +97,7 @@ def test_a_laptop_and_a_lamp_stay_whole():
     stem = np.c_[np.full(len(h), 0.37), np.zeros(len(h)), h]
     shade = _box((0.26, -0.11, TABLE + 0.22), (0.48, 0.11, TABLE + 0.34), rng)
     res, labs = _detect([np.r_[base, screen], np.r_[foot, stem, shade]])
-    assert _whole(labs[0]) != _whole(labs[1])
+    assert whole(labs[0]) != whole(labs[1])
     assert res.stats["layer_splits"] == 0
 
 
@@ -235,7 +222,7 @@ def test_the_sampled_shelfs_top_box_is_its_own_object_on_the_stack():
     cloud = sampled(scene, 150_000, seed=0)
     det = detect(cloud.points.astype(np.float64), load_config(None, []))
     names = list(scene.object_names)
-    top = _whole(det.objects.labels[cloud.object == names.index("stack_a_3")])
-    under = _whole(det.objects.labels[cloud.object == names.index("stack_a_2")])
+    top = whole(det.objects.labels[cloud.object == names.index("stack_a_3")])
+    under = whole(det.objects.labels[cloud.object == names.index("stack_a_2")])
     assert top != under
     assert det.objects.clusters[top].supported_by == under

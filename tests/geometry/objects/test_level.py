@@ -3,15 +3,12 @@ objects' feet never join two objects, and go back to the object they lie against
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 import pytest
-from sparse_scenes import box_faces, table_surface
+from sparse_scenes import box_faces, detect_parts, table_surface, whole
 
-from supportnode.geometry.objects import detect_objects
 from supportnode.geometry.objects.level import LEVEL, height_above, nearest_object_point
-from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.geometry.surfaces import Surface
 
 TABLE = 0.75
 SPACING = 0.012  # a sparsely sampled scene: a handful of points per 3 cm voxel
@@ -39,16 +36,7 @@ def _table_around(boxes, width: float, rng, dz: float = 0.0) -> np.ndarray:
 
 
 def _detect(parts: list[np.ndarray], table: Surface):
-    pts = np.concatenate(parts)
-    res = detect_objects(pts, SurfaceResult([table], np.full(len(pts), -1, np.int32)))
-    bounds = np.cumsum([0] + [len(p) for p in parts])
-    return res, [res.labels[a:b] for a, b in itertools.pairwise(bounds)]
-
-
-def _whole(lab: np.ndarray) -> int:
-    ids, counts = np.unique(lab, return_counts=True)
-    assert counts.max() >= 0.9 * len(lab), dict(zip(ids.tolist(), counts.tolist(), strict=True))
-    return int(ids[counts.argmax()])
+    return detect_parts(parts, table)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -62,7 +50,7 @@ def test_the_table_between_two_boxes_does_not_join_them(seed):
     ]
     table = _table_around(boxes, 0.04, rng, dz=0.002)
     res, (a, b, t) = _detect([*(_box(lo, hi, rng) for lo, hi in boxes), table], _table())
-    ia, ib = _whole(a), _whole(b)
+    ia, ib = whole(a), whole(b)
     assert ia != ib
     assert len(res.clusters) == 2
     # A table point goes to a box it lies against (beside one box, that one), or to none.
