@@ -12,7 +12,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["cluster_bottoms", "level_split", "lowest_per_cell", "plane_heights", "table_lookup"]
+__all__ = ["cluster_bottoms", "level_split", "lowest_per_cell", "table_lookup"]
 
 
 @njit(cache=True, nogil=True)
@@ -78,33 +78,6 @@ def lowest_per_cell(
 
 
 @njit(cache=True, nogil=True)
-def _plane_heights(cp, support, planes):
-    out = np.empty(cp.shape[0])
-    s_max = planes.shape[0]
-    for p in range(cp.shape[0]):
-        s = support[p]
-        if s < 0 or s >= s_max:
-            out[p] = np.nan
-            continue
-        cx, cy, cz, gx, gy = planes[s, 0], planes[s, 1], planes[s, 2], planes[s, 3], planes[s, 4]
-        out[p] = cp[p, 2] - (cz + gx * (cp[p, 0] - cx) + gy * (cp[p, 1] - cy))
-    return out
-
-
-def plane_heights(cp: np.ndarray, support: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """(M,) float64 height (m) of each point of cp (M, 3) float64 above the plane of its
-    surface ``support`` (M,) int64: ``planes[s]`` (S, 5) = (cx, cy, cz, gx, gy), the plane
-    z = cz + gx (x - cx) + gy (y - cy); NaN where support is -1 (or beyond S) and where the
-    plane's row is NaN. One pass, where numpy gathered five (M,) temporaries."""
-    planes = np.ascontiguousarray(planes, np.float64).reshape(-1, 5)
-    cp = np.ascontiguousarray(cp, np.float64).reshape(-1, 3)
-    support = np.ascontiguousarray(support, np.int64).reshape(-1)
-    if len(support) != len(cp):
-        raise ValueError(f"support has {len(support)} rows, cp {len(cp)}")
-    return _plane_heights(cp, support, planes)
-
-
-@njit(cache=True, nogil=True)
 def _level_split(cp, rows, support, planes, level, reach):
     m = cp.shape[0]
     kept = np.empty(m, np.int64)
@@ -151,7 +124,7 @@ def level_split(
     reach: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The points cp (M, 3) float64 (rows (M,) int64 their ids, support (M,) int64 their
-    surfaces, planes as for :func:`plane_heights`) parted at their surface's level: those
+    surfaces, planes (S, 5) = (cx, cy, cz, gx, gy) their planes z = cz + gx (x - cx) + gy (y - cy), NaN rows for none) parted at their surface's level: those
     more than ``level`` m off its plane (or over none) are kept, in order. Returns the kept
     points' rows (K,), points (K, 3), supports (K,), the positions (B,) among them of those
     within level + reach above their plane (an object's bottom), and the positions (M - K,)
@@ -274,5 +247,4 @@ def _warm() -> None:
     cp = np.array([[0.01, 0.01, 0.5], [0.5, 0.5, 0.0]])
     table_lookup(cp, np.array([0.2]), np.array([0.1, 0.1]), np.zeros(2, np.int64), best)
     lowest_per_cell(cp, np.array([0.1, 0.1]), np.zeros(2, np.int64), (2, 2))
-    plane_heights(cp, np.array([0, -1]), np.zeros((1, 5)))
     level_split(cp, np.arange(2), np.array([0, -1]), np.zeros((1, 5)), 0.003, 0.03)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from supportnode.geometry.objects.support_lookup import _SupportTable
 from supportnode.kernels import runtime
-from supportnode.kernels.lookup import _warm, plane_heights, table_lookup
+from supportnode.kernels.lookup import _warm, table_lookup
 
 
 def _numpy_lookup(table: _SupportTable, cp: np.ndarray) -> np.ndarray:
@@ -148,33 +148,15 @@ def test_lowest_per_cell_bad_shape():
         lowest_per_cell(np.zeros((1, 3)), np.ones(2), np.zeros(2), (-1, 2))
 
 
-@settings(max_examples=60, deadline=None)
-@given(m=st.integers(0, 200), s=st.integers(0, 5), seed=st.integers(0, 10_000))
-def test_plane_heights_match_numpy(m, s, seed):
-    from supportnode.kernels.lookup import plane_heights
-
-    rng = np.random.default_rng(seed)
-    planes = np.column_stack([rng.normal(0, 1, (s, 3)), rng.normal(0, 0.2, (s, 2))])
-    if s:
-        planes[rng.integers(0, s)] = np.nan  # a surface left out (a noise band)
-    cp = rng.normal(0, 1, (m, 3))
-    support = rng.integers(-1, s + 1, m)  # -1 none; s: beyond the table
-    want = np.full(m, np.nan)
-    ok = (support >= 0) & (support < s)
+def _numpy_heights(cp, support, planes):
+    """Each point's height above its surface's plane, NaN over none (the reference)."""
+    h = np.full(len(cp), np.nan)
+    ok = (support >= 0) & (support < len(planes))
     p = planes[support[ok]]
-    want[ok] = cp[ok, 2] - (
+    h[ok] = cp[ok, 2] - (
         p[:, 2] + p[:, 3] * (cp[ok, 0] - p[:, 0]) + p[:, 4] * (cp[ok, 1] - p[:, 1])
     )
-    got = plane_heights(cp, support, planes)
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
-    assert np.array_equal(np.isnan(got), np.isnan(want))
-
-
-def test_plane_heights_bad_input():
-    from supportnode.kernels.lookup import plane_heights
-
-    with pytest.raises(ValueError, match="support has 2 rows"):
-        plane_heights(np.zeros((3, 3)), np.zeros(2, np.int64), np.zeros((1, 5)))
+    return h
 
 
 @settings(max_examples=60, deadline=None)
@@ -192,7 +174,9 @@ def test_level_split_matches_numpy(m, s, seed):
         p = planes[support[on]]
         cp[on, 2] = p[:, 2] + p[:, 3] * (cp[on, 0] - p[:, 0]) + p[:, 4] * (cp[on, 1] - p[:, 1])
         cp[on, 2] += rng.choice([0.0, 0.002, -0.0029, 0.01, 0.05], on.sum())
-    h = plane_heights(cp, support, planes)
+    if s:
+        planes[rng.integers(0, s)] = np.nan  # a surface left out (a noise band)
+    h = _numpy_heights(cp, support, planes)
     at = np.abs(h) <= 0.003
     kept, kept_cp, kept_support, low, level = level_split(cp, rows, support, planes, 0.003, 0.03)
     np.testing.assert_array_equal(level, np.flatnonzero(at))

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from supportnode.geometry.surfaces import Surface
-from supportnode.kernels.lookup import level_split, plane_heights
+from supportnode.kernels.lookup import level_split
 
 # Points this close to a surface's fitted plane are at its level, metres. Fixed, not scaled
 # with the surface's measured flatness: under 1 cm noise a band of one flatness took the
@@ -28,7 +28,7 @@ LEVEL = 0.003
 
 
 def _planes(surfaces: list[Surface]) -> np.ndarray | None:
-    """(S, 5) the surfaces' fitted planes by id, as `kernels.lookup.plane_heights` takes
+    """(S, 5) the surfaces' fitted planes by id, as `kernels.lookup.level_split` takes
     them, NaN rows for surfaces with a noise band (and ids of none); None when no surface is
     left."""
     planes = np.full((max((s.id for s in surfaces), default=-1) + 1, 5), np.nan)
@@ -38,16 +38,6 @@ def _planes(surfaces: list[Surface]) -> np.ndarray | None:
         c, n = s.centroid, s.normal
         planes[s.id] = c[0], c[1], c[2], -n[0] / n[2], -n[1] / n[2]
     return planes if np.isfinite(planes).any() else None
-
-
-def height_above(cp: np.ndarray, support: np.ndarray, surfaces: list[Surface]) -> np.ndarray:
-    """(M,) float64 height of each candidate of cp (M, 3) above the fitted plane of the surface
-    under it (support (M,) surface id, -1 none), metres, a plane that may be tilted (a sloped
-    table); NaN over no surface and over surfaces with a noise band."""
-    planes = _planes(surfaces)
-    if planes is None:
-        return np.full(len(cp), np.nan)
-    return plane_heights(cp, support, planes)
 
 
 def set_aside(

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from sparse_scenes import box_faces, detect_parts, table_surface, whole
 
-from supportnode.geometry.objects.level import LEVEL, height_above, nearest_object_point
+from supportnode.geometry.objects.level import LEVEL, nearest_object_point, set_aside
 from supportnode.geometry.surfaces import Surface
 
 TABLE = 0.75
@@ -79,16 +79,20 @@ def test_a_small_objects_feet_count_towards_its_size():
     assert (a == 0).all() and (f == 0).all()
 
 
-def test_height_above_follows_a_tilted_plane():
+def test_the_level_follows_a_tilted_plane():
     table = _table(normal=(0.1, 0.0, 1.0))
-    x = np.array([-0.5, 0.0, 0.5, 0.5])
+    x = np.array([-0.5, 0.0, 0.5, 0.5, 0.3])
     plane = TABLE - 0.1 * x
-    cp = np.c_[x, np.zeros(4), plane + np.array([0.0, 0.002, 0.01, -0.001])]
-    support = np.array([0, 0, 0, -1])
-    h = height_above(cp, support, [table])
-    assert np.allclose(h[:3], [0.0, 0.002, 0.01])
-    assert np.isnan(h[3])
-    assert (np.abs(h[:3]) <= LEVEL).tolist() == [True, True, False]
+    cp = np.c_[x, np.zeros(5), plane + np.array([0.0, 0.002, 0.01, -0.001, 0.02])]
+    support = np.array([0, 0, 0, -1, 0])
+    kept, kept_cp, kept_support, bottom, level = set_aside(
+        np.arange(5), cp, support, [table], 0.015
+    )
+    assert level.tolist() == [0, 1]  # within LEVEL of the plane, over the table
+    assert kept.tolist() == [2, 3, 4] and np.array_equal(kept_cp, cp[2:])
+    assert kept_support.tolist() == [0, -1, 0]
+    assert bottom.tolist() == [0]  # 1 cm up: an object's bottom; 2 cm: beyond LEVEL + reach
+    assert LEVEL < 0.01
 
 
 def test_nearest_object_point_within_reach_only():
