@@ -441,6 +441,27 @@ def test_boxes_of_different_heights_face_to_face_split():
     assert len(res.clusters) == 1
 
 
+def test_three_boxes_in_a_row_step_twice_down_to_two_centimetres():
+    """Three boxes of three heights face to face (the cluttered scene's box_a, box_b, box_c):
+    the first cut leaves two boxes on one side, cut again; the last step is 2 cm."""
+    floor = make_surface(0, 0.0, -1, 1, -1, 1)
+    heights = (0.14, 0.10, 0.08)
+    edges = (0.0, 0.16, 0.36, 0.48)  # x, metres: the middle box the widest
+    parts = []
+    for k, h in enumerate(heights):
+        b = box((edges[k], 0.0, 0.0), (edges[k + 1], 0.12, h))
+        parts.append(b if k == 0 else b[b[:, 0] > edges[k] + 1e-9])  # shared face: the left box
+    pts = np.concatenate(parts)
+    res = detect_objects(pts, SurfaceResult([floor], np.full(len(pts), -1, np.int32)))
+    assert len(res.clusters) == 3
+    ordered = sorted(res.clusters, key=lambda c: c.centroid[0])
+    assert [c.height for c in ordered] == pytest.approx(heights)
+    start = 0
+    for part, c in zip(parts, ordered, strict=True):
+        assert (res.labels[start : start + len(part)] == c.id).mean() > 0.9
+        start += len(part)
+
+
 def test_fast_paths_match_reference_implementations(monkeypatch: pytest.MonkeyPatch):
     """The speed-ups of the voxel method give the same answer as the straightforward code."""
     import scipy.ndimage as ndi

@@ -23,7 +23,7 @@ from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.layers import Groups
 from supportnode.geometry.objects.split_concave import _CONCAVE_MAX_EXTENT, _split_concave
 from supportnode.geometry.objects.split_footprint import Fill, _may_split, _split_recursive
-from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_step
+from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_steps
 from supportnode.kernels.groups import group_rows
 from supportnode.params import ObjectParams
 
@@ -206,11 +206,11 @@ def _split_one(
     if n_parts >= 2 or extent > _STEP_MAX_EXTENT:
         return _with_level(parts, level, xy_c), n_parts, None
     p_c = np.take(cp, idx, axis=0)
-    step, dense = _split_step(
+    step, dense = _split_steps(
         p_c if level is None else p_c[own], params.cluster_cell, params.min_points
     )
     if step is not None:
-        return _with_level(step, level, xy_c), 2, "step_splits"
+        return _with_level(step, level, xy_c), int(step.max()) + 1, "step_splits"
     if dense and params.split_concave and extent <= _CONCAVE_MAX_EXTENT:
         # Not tried on sparse footprints (far scans) or wide structure. With the level points:
         # the crease rule was built on them (its parts stand on the cluster's bottom).

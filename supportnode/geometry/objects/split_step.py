@@ -23,11 +23,14 @@ _STEP_LINK = 0.015
 _STEP_PART_FRACTION = 0.3
 _STEP_COVER = 0.7
 _STEP_FLAT = 0.01
-_STEP_MIN = 0.03
+# Plateaus are apart once more than _STEP_LINK: 2 cm steps (boxes of 8 and 10 cm face to face)
+# are cut, with a millimetre of margin for the measured medians.
+_STEP_MIN = 0.019
 _STEP_RIM_FREE = 0.5
 _STEP_STAND = 0.02
 _STEP_MAX_EXTENT = 1.5
 _STEP_DENSE = 0.9
+_STEP_DEPTH = 3  # levels of cuts: up to 2**3 boxes in a row
 
 
 def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray | None, bool]:
@@ -87,6 +90,26 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
         if np.percentile(p[part == n, 2], 2.0) - bottom > _STEP_STAND:
             return None, True  # one level stands on the other, not on the surface
     return (part if counts[0] >= counts[1] else 1 - part), True  # part 0 the larger
+
+
+def _split_steps(
+    p: np.ndarray, cell: float, min_points: int, depth: int = _STEP_DEPTH
+) -> tuple[np.ndarray | None, bool]:
+    """(P,) parts 0..K-1 of p (P, 3) by _split_step, each part split again up to depth levels
+    (three boxes of three heights face to face step twice), or None; and whether p's footprint
+    was dense enough to be tried. Part 0 is the larger part of the first cut."""
+    part, dense = _split_step(p, cell, min_points)
+    if part is None or depth <= 1:
+        return part, dense
+    out = part.copy()
+    next_part = 2
+    for k in (0, 1):
+        rows = np.flatnonzero(part == k)
+        sub, _ = _split_steps(p[rows], cell, min_points, depth - 1)
+        if sub is not None:
+            out[rows[sub > 0]] = next_part + sub[sub > 0] - 1
+            next_part += int(sub.max())
+    return out, dense
 
 
 def _plateaus(grid: np.ndarray, cells: np.ndarray) -> np.ndarray:
