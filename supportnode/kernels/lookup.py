@@ -239,6 +239,47 @@ def cluster_bottoms(
     return _bottoms(z, runs, float(band), int(min_points), float(q))
 
 
+@njit(cache=True, nogil=True)
+def _level_points(cp, planes, level):
+    live = np.flatnonzero(np.isfinite(planes[:, 0]))
+    pl = planes[live]
+    m, k = cp.shape[0], live.shape[0]
+    count = np.zeros(m, np.int8)  # planes at whose level each point lies (first pass)
+    for p in range(m):
+        x, y, z = cp[p, 0], cp[p, 1], cp[p, 2]
+        for s in range(k):
+            h = z - (pl[s, 2] + pl[s, 3] * (x - pl[s, 0]) + pl[s, 4] * (y - pl[s, 1]))
+            if abs(h) <= level:
+                count[p] += 1
+    n = 0
+    for p in range(m):
+        n += count[p]
+    rows = np.empty(n, np.int64)
+    surf = np.empty(n, np.int64)
+    i = 0
+    for p in range(m):
+        if count[p] == 0:
+            continue
+        x, y, z = cp[p, 0], cp[p, 1], cp[p, 2]
+        for s in range(k):
+            h = z - (pl[s, 2] + pl[s, 3] * (x - pl[s, 0]) + pl[s, 4] * (y - pl[s, 1]))
+            if abs(h) <= level:
+                rows[i] = p
+                surf[i] = live[s]
+                i += 1
+    return rows, surf
+
+
+def level_points(cp: np.ndarray, planes: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """The points of cp (M, 3) float64 metres within ``level`` m of a plane of planes (S, 5)
+    = (cx, cy, cz, gx, gy), z = cz + gx (x - cx) + gy (y - cy) (NaN rows: none): their rows
+    (K,) int64 ascending and each one's plane (K,) int64 (a point at two planes' levels
+    twice). One compiled pass over the points for all planes."""
+    cp = np.ascontiguousarray(cp, np.float64).reshape(-1, 3)
+    planes = np.ascontiguousarray(planes, np.float64).reshape(-1, 5)
+    return _level_points(cp, planes, float(level))
+
+
 @warmer
 def _warm() -> None:
     cluster_bottoms(np.linspace(0.0, 1.0, 150), np.array([[0, 120], [120, 150]]), 0.02)
@@ -248,3 +289,4 @@ def _warm() -> None:
     table_lookup(cp, np.array([0.2]), np.array([0.1, 0.1]), np.zeros(2, np.int64), best)
     lowest_per_cell(cp, np.array([0.1, 0.1]), np.zeros(2, np.int64), (2, 2))
     level_split(cp, np.arange(2), np.array([0, -1]), np.zeros((1, 5)), 0.003, 0.03)
+    level_points(cp, np.zeros((1, 5)), 0.003)

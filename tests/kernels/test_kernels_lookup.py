@@ -191,3 +191,43 @@ def test_level_split_bad_input():
 
     with pytest.raises(ValueError, match="differ"):
         level_split(np.zeros((3, 3)), np.arange(2), np.zeros(3), np.zeros((1, 5)), 0.003, 0.03)
+
+
+@settings(max_examples=60, deadline=None)
+@given(m=st.integers(0, 200), s=st.integers(0, 4), seed=st.integers(0, 10_000))
+def test_level_points_matches_numpy(m, s, seed):
+    from supportnode.kernels.lookup import level_points
+
+    rng = np.random.default_rng(seed)
+    planes = np.column_stack([rng.normal(0, 1, (s, 3)), rng.normal(0, 0.2, (s, 2))])
+    cp = rng.normal(0, 1, (m, 3))
+    if s and m:  # points at a plane's level, on the band's edges, two planes at once too
+        near = rng.integers(0, s, m)
+        on = rng.random(m) < 0.6
+        p = planes[near[on]]
+        cp[on, 2] = p[:, 2] + p[:, 3] * (cp[on, 0] - p[:, 0]) + p[:, 4] * (cp[on, 1] - p[:, 1])
+        cp[on, 2] += rng.choice([0.0, 0.002, -0.0029, 0.01], on.sum())
+        planes = np.vstack([planes, planes[:1]])  # the same plane twice
+    if s:
+        planes[rng.integers(0, len(planes))] = np.nan  # a surface left out (a noise band)
+    want_rows, want_surf = [], []
+    for p in range(m):
+        for k in range(len(planes)):
+            h = _numpy_heights(cp[p : p + 1], np.array([k]), planes)[0]
+            if abs(h) <= 0.003:
+                want_rows.append(p)
+                want_surf.append(k)
+    rows, surf = level_points(cp, planes, 0.003)
+    np.testing.assert_array_equal(rows, np.array(want_rows, np.int64))
+    np.testing.assert_array_equal(surf, np.array(want_surf, np.int64))
+
+
+def test_level_points_of_no_plane_and_no_point():
+    from supportnode.kernels.lookup import level_points
+
+    rows, surf = level_points(np.zeros((0, 3)), np.zeros((2, 5)), 0.003)
+    assert rows.shape == surf.shape == (0,)
+    rows, surf = level_points(np.ones((3, 3)), np.full((1, 5), np.nan), 0.003)
+    assert rows.shape == surf.shape == (0,)
+    rows, surf = level_points(np.array([[5.0, 5.0, 1.0]]), np.array([[0, 0, 1.0, 0, 0]]), 0.0)
+    assert rows.tolist() == [0] and surf.tolist() == [0]

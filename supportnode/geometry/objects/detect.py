@@ -30,7 +30,7 @@ from supportnode.geometry.objects.convexity import CELL_STEPS, cell_levels, clus
 from supportnode.geometry.objects.describe import _describe, _stack
 from supportnode.geometry.objects.feet import claim_feet, claim_raised
 from supportnode.geometry.objects.layers import cut_layers
-from supportnode.geometry.objects.level import nearest_bottom, set_aside
+from supportnode.geometry.objects.level import extend_lookups, nearest_bottom, set_aside
 from supportnode.geometry.objects.result import Components, ObjectResult, Segmentation
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
@@ -115,6 +115,8 @@ def _components(
     cp = np.take(pts, cand, axis=0)  # np.take: 5x faster than pts[cand] for (N, 3) rows
     stats: dict = {"method": params.method, "candidates": len(cand)}
     lookups = _lookups(surfaces.surfaces)
+    if params.method == "voxel":  # the footprints' rings run on along their level
+        lookups = extend_lookups(cp, lookups, surfaces.surfaces)
     level = bottom = np.zeros(0, np.int64)
     if params.method in ("voxel", "convex"):
         support = _support_below(cp, surfaces.surfaces, params.support_tolerance, lookups)

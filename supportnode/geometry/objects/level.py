@@ -15,16 +15,98 @@ Points (M, 3) float64 metres, z up.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from scipy.spatial import cKDTree
 
+from supportnode.geometry.objects.support_lookup import _SupportLookup
 from supportnode.geometry.surfaces import Surface
-from supportnode.kernels.lookup import level_split
+from supportnode.kernels.footprint import fill_holes, label8
+from supportnode.kernels.lookup import level_points, level_split
 
 # Points this close to a surface's fitted plane are at its level, metres. Fixed, not scaled
 # with the surface's measured flatness: under 1 cm noise a band of one flatness took the
 # bottoms of the objects too and cost the noisy rows 0.01-0.04 object ARI.
 LEVEL = 0.003
+
+
+# A surface's region growing stops short of its own board where a strip of it lies between
+# two things (a box and a shelf's side) narrower than two of its voxels. The cells holding
+# candidates at the surface's level (within LEVEL of its plane) joined to its footprint
+# through such cells are its footprint too; looked for within this of the footprint's
+# raster, metres.
+BEYOND = 1.0
+
+
+def extend_lookups(
+    cp: np.ndarray,
+    lookups: tuple[list[_SupportLookup], list[_SupportLookup]],
+    surfaces: list[Surface],
+) -> tuple[list[_SupportLookup], list[_SupportLookup]]:
+    """The surfaces' lookups (undilated; dilated by one cell, whose ring holds what rises
+    from a surface's height: see ``support_lookup._support_below``), the rings of those
+    without a noise band grown along their level (see BEYOND) and hole-filled: the board runs
+    on under the stack whose far side its growth missed, so the whole stack stands on it and
+    the board's strip there is set aside with its level points instead of linking the stack
+    to the shelf's side. cp: (M, 3) the candidates."""
+    planes = _planes(surfaces)
+    if planes is None or len(cp) == 0:
+        return lookups
+    rows, surf = level_points(cp, planes, LEVEL)
+    if len(rows) == 0:
+        return lookups
+    order = np.argsort(surf, kind="stable")
+    rows, surf = rows[order], surf[order]
+    bounds = np.searchsorted(surf, np.arange(len(planes) + 1))
+    dilated = list(lookups[1])
+    for k, lk in enumerate(lookups[0]):
+        a, b = (int(v) for v in bounds[lk.id : lk.id + 2]) if lk.id < len(planes) else (0, 0)
+        if a == b:
+            continue
+        grown = _grown(lk, np.take(cp, rows[a:b], axis=0)[:, :2], BEYOND)
+        if grown is not None:
+            dilated[k] = _union(dilated[k], grown)
+    return list(lookups[0]), dilated
+
+
+def _union(a: _SupportLookup, b: _SupportLookup) -> _SupportLookup:
+    """a's lookup over the union of a's and b's footprints (same cell size)."""
+    lo = np.minimum(a.origin, b.origin)
+    hi = np.maximum(a.origin + a.mask.shape, b.origin + b.mask.shape)
+    mask = np.zeros(tuple(hi - lo), bool)
+    for lk in (a, b):
+        i, j = lk.origin - lo
+        mask[i : i + lk.mask.shape[0], j : j + lk.mask.shape[1]] |= lk.mask
+    out = copy.copy(a)
+    out.mask, out.origin = mask, lo
+    return out
+
+
+def _grown(lk: _SupportLookup, xy: np.ndarray, reach: float) -> _SupportLookup | None:
+    """lk with its footprint joined by the cells of the points xy (P, 2) that connect to it
+    through cells holding such points (8-connected, within ``reach`` metres of its raster),
+    holes filled; None when none does."""
+    r = np.ceil(reach / lk.cell).astype(np.int64)
+    h, w = lk.mask.shape
+    ij = np.floor(xy / lk.cell).astype(np.int64) - (lk.origin - r)
+    shape = np.array([h, w]) + 2 * r
+    inside = np.all((ij >= 0) & (ij < shape), axis=1)
+    mask = np.zeros(tuple(shape), bool)
+    mask[r[0] : r[0] + h, r[1] : r[1] + w] = lk.mask
+    grid = mask.copy()
+    grid[ij[inside, 0], ij[inside, 1]] = True
+    comp, _ = label8(grid)
+    keep = np.zeros(int(comp.max()) + 1, bool)
+    keep[comp[mask]] = True
+    keep[0] = False
+    joined = keep[comp]
+    if not (joined & ~mask).any():
+        return None
+    out = copy.copy(lk)
+    out.mask = fill_holes(joined)
+    out.origin = lk.origin - r
+    return out
 
 
 def _planes(surfaces: list[Surface]) -> np.ndarray | None:

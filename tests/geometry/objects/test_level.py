@@ -110,3 +110,23 @@ def test_candidates_all_at_the_tables_level_make_no_object():
     res, (lab,) = _detect([sheet], _table())
     assert res.clusters == [] and (lab == -1).all()
     assert res.stats["level_points"] == len(sheet)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_box_past_the_end_of_the_grown_table_is_one_object_on_it(seed):
+    # The table's region growing stopped at x = 0 (a strip of it beside clutter), but the
+    # table goes on at its level to x = 0.4, and a box stands across that end, 20 cm past it:
+    # over the table throughout, not cut in two where the grown footprint ends.
+    import dataclasses
+
+    rng = np.random.default_rng(seed)
+    grown = _table(band=(0.0, 0.0))
+    grown = dataclasses.replace(grown, cells=grown.cells[grown.cells[:, 0] < 0])
+    box = ((-0.1, -0.05, TABLE), (0.2, 0.05, TABLE + 0.1))
+    table = _table_around([box], 0.2, rng)
+    table = table[table[:, 0] >= 0.0]  # the table left to the objects: past the grown part
+    res, (b, t) = _detect([_box(*box, rng), table], grown)
+    ib = whole(b)
+    assert len(res.clusters) == 1
+    assert res.clusters[ib].surface_id == 0
+    assert (t == -1).mean() > 0.5  # the table's own points are no object
