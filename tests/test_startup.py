@@ -25,3 +25,10 @@ def test_detect_imports_the_kernels_of_some_clouds_only_when_they_come():
     loaded = _loaded_after(*_DETECT)
     on_demand = {f"supportnode.kernels.{m}" for m in ("band", "cellgraph", "rotate", "windows")}
     assert not on_demand & loaded
+
+
+def test_detect_imports_no_ndimage_nor_csgraph():
+    # scipy.spatial stays (Qhull's volumes, k-d trees); the rasters' transforms and morphology
+    # are compiled (`kernels.morphology`) and csgraph is imported by its rare users
+    loaded = _loaded_after(*_DETECT)
+    assert not {m for m in loaded if m.startswith(("scipy.ndimage", "scipy.sparse.csgraph"))}
