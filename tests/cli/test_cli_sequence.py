@@ -133,12 +133,21 @@ def test_progress_bar_on_a_terminal(monkeypatch) -> None:
     screen = io.StringIO()
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     monkeypatch.setattr(
-        _console, "Console", lambda **kw: Console(file=screen, force_terminal=True, width=100)
+        _console, "make_console", lambda **kw: Console(file=screen, force_terminal=True, width=100)
     )
+    # A job done within _PLAIN_AFTER_S draws nothing.
     with _console.progress("sim kitchen", 3, "frames") as bar:
-        bar.advance(2)
+        bar.advance(3)
+    assert screen.getvalue() == "" and bar._bar is None
+    monkeypatch.setattr(_console, "_PLAIN_AFTER_S", 0.0)
+    with _console.progress("sim kitchen", 3, "frames") as bar:
+        bar.advance(1, "frame 1")
+        assert bar._timer is not None
+        bar._timer.join(timeout=10)  # the bar starts from what was done meanwhile
+        bar.advance(1)
         bar._bar.refresh()
     assert "sim kitchen" in screen.getvalue() and "2/3" in screen.getvalue()
+    assert "frame 1" in screen.getvalue()
 
 
 def test_single_cloud_ctrl_c_says_interrupted(tmp_path: Path, capsys, monkeypatch, rng) -> None:
