@@ -99,9 +99,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv is None:  # the command line's: this process ends when main returns
         _process.process_entry()
     try:
-        return _main(argv)
+        code = _main(argv)
     finally:
         _process.freeze()  # shutdown's collections skip what is left (~0.2 s after a detect)
+    _process.end(code)  # when the command left nothing to finish: no shutdown at all
+    return code
 
 
 def _main(argv: Sequence[str] | None) -> int:

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from supportnode.cli._common import add_config_arguments, add_rerun_arguments, positive_seconds
 from supportnode.cli._console import Interrupted, print_table, progress
-from supportnode.cli._process import long_lived
+from supportnode.cli._process import long_lived, nothing_left
 from supportnode.cli._sequence import add_sequence_arguments, process_sequence
 
 if TYPE_CHECKING:
@@ -142,6 +142,8 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         _summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0)
     if args.view or args.save:
         _rerun(args, params, points, detection)
+    elif not args.render:  # files written and closed, no viewer or plotting library to finish
+        nothing_left()
     return 0
 
 
