@@ -27,7 +27,6 @@ from supportnode.geometry.objects import (
     split_objects,
 )
 from supportnode.geometry.surfaces import SurfaceResult, detect_surfaces
-from supportnode.kernels.rotate import transform_points_fast
 from supportnode.params import DetectParams
 
 if TYPE_CHECKING:  # the estimator is imported only when alignment runs
@@ -188,6 +187,9 @@ def detect(
     rotation = None
     gravity = None
     if align:
+        # Imported here: `runtime.warm` loads the kernels of every imported kernel module.
+        from supportnode.kernels.rotate import transform_points_fast
+
         t = time.perf_counter()
         gravity = _estimate_gravity(pts, params, sensor_origin)
         rotation = gravity.rotation

@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 
 from supportnode import __version__
+from supportnode.cli import _process
 from supportnode.errors import SupportNodeError
 
 DESCRIPTION = """\
@@ -95,6 +96,17 @@ def _join_negative_lists(argv: list[str]) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    if argv is None:  # the command line's: this process ends when main returns
+        _process.process_entry()
+    try:
+        code = _main(argv)
+    finally:
+        _process.freeze()  # shutdown's collections skip what is left (~0.2 s after a detect)
+    _process.end(code)  # when the command left nothing to finish: no shutdown at all
+    return code
+
+
+def _main(argv: Sequence[str] | None) -> int:
     argv = _join_negative_lists(list(sys.argv[1:] if argv is None else argv))
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(command if command in COMMANDS else None)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from supportnode.cli._common import add_config_arguments, add_rerun_arguments, positive_seconds
 from supportnode.cli._console import Interrupted, print_table, progress
+from supportnode.cli._process import long_lived, nothing_left
 from supportnode.cli._sequence import add_sequence_arguments, process_sequence
 
 if TYPE_CHECKING:
@@ -73,10 +74,11 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from supportnode.config import load_config
-    from supportnode.io.scans import is_sequence
+    with long_lived():
+        from supportnode.config import load_config
+        from supportnode.io.scans import is_sequence
 
-    params = load_config(args.config, args.overrides)
+        params = load_config(args.config, args.overrides)
     name = Path(args.cloud).stem
     out_dir = Path(args.out) if args.out else Path("out") / name
     if is_sequence(args.cloud):
@@ -88,11 +90,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) -> int:
-    from supportnode.config import config_to_dict
-    from supportnode.io.results import write_detection
-    from supportnode.io.units import UNITS
-    from supportnode.kernels import runtime
-    from supportnode.pipeline import detect
+    with long_lived():
+        from supportnode.config import config_to_dict
+        from supportnode.io.results import write_detection
+        from supportnode.io.units import UNITS
+        from supportnode.kernels import runtime
+        from supportnode.pipeline import detect
 
     t0 = time.perf_counter()
     stages = 3 + bool(args.render)
@@ -100,7 +103,8 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         bar.advance(0, "reading")
         # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart,
         # so that the stage timings are the work on this cloud.
-        kernels_time = runtime.warm()
+        with long_lived():
+            kernels_time = runtime.warm()
         runtime.keep_freed_memory()  # this process's: the stages reuse freed pages
         t = time.perf_counter()
         cloud, unit, guess = _read(args.cloud, args.units)
@@ -138,6 +142,8 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         _summary(args.cloud, cloud, detection, out_dir, write_time, time.perf_counter() - t0)
     if args.view or args.save:
         _rerun(args, params, points, detection)
+    elif not args.render:  # files written and closed, no viewer or plotting library to finish
+        nothing_left()
     return 0
 
 

@@ -12,10 +12,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from supportnode.geometry.objects import Cluster, ObjectResult, Segmentation
 from supportnode.geometry.surfaces import Surface, SurfaceResult
+from supportnode.kernels.morphology import distance_transform, squared_distance_transform
 from supportnode.params import FreeSpaceParams
 
 __all__ = ["FreeSpace", "free_space", "free_space_all"]
@@ -282,18 +282,9 @@ def _stable_argsort(key: np.ndarray) -> np.ndarray:
 
 def _squared_edt(mask: np.ndarray) -> np.ndarray:
     """Squared ``ndimage.distance_transform_edt`` of a 2-D bool mask with some False cell,
-    (H, W) integers (cells): from the feature transform, without the float64 passes of the
-    distances (the nearest cells and their squared distances are exact integers, and the
+    (H, W) int64 (cells^2): exact integers, without the float64 passes of the distances (the
     square root keeps their order and equality)."""
-    ft = ndimage.distance_transform_edt(mask, return_distances=False, return_indices=True)
-    if max(mask.shape) >= 1 << 15:  # squares of int32 offsets could overflow
-        ft = ft.astype(np.int64)
-    dr = ft[0] - np.arange(mask.shape[0], dtype=ft.dtype)[:, None]
-    dc = ft[1] - np.arange(mask.shape[1], dtype=ft.dtype)[None, :]
-    dr *= dr
-    dc *= dc
-    dr += dc
-    return dr
+    return squared_distance_transform(mask)
 
 
 def _box(mask: np.ndarray) -> tuple[int, int, int, int]:
@@ -320,7 +311,7 @@ def _dilate_margin(objects: np.ndarray, c: float, margin: float) -> np.ndarray:
     ok = np.sqrt(k.astype(np.float64)) * c <= margin + 1e-9
     half = ok.sum(axis=1) - 1  # widest |dj| that passes for each |di| (-1: none)
     if not 0 <= half[0] < len(d) - 1:  # a negative margin, or the disc may reach beyond d
-        return ndimage.distance_transform_edt(~objects) * c <= margin + 1e-9
+        return distance_transform(~objects) * c <= margin + 1e-9
     wide = [objects]  # wide[m]: objects dilated by m cells along rows (OR over |dj| <= m)
     for m in range(1, int(half[0]) + 1):
         nxt = wide[-1].copy()

@@ -6,10 +6,13 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from supportnode.errors import ProtocolError, SupportNodeError
-from supportnode.io.sources import Source
-from supportnode.msgs import Limits, PointCloud
+
+if TYPE_CHECKING:  # `detect` on one cloud asks is_sequence only: no readers of recordings
+    from supportnode.io.sources import Source
+    from supportnode.msgs import PointCloud
 
 __all__ = ["ScanSelection", "is_sequence"]
 
@@ -58,6 +61,8 @@ class ScanSelection:
     def scans(self, source: Source, topic: str) -> Iterator[PointCloud]:
         """The selected scans, decoded; one that does not decode is skipped and counted, and
         so are those the source skipped (``skipped``, once the scans are all read)."""
+        from supportnode.msgs import Limits, PointCloud
+
         limits = Limits()
         for i, m in enumerate(source.messages([topic], self.start, self.duration)):
             if i % self.every:

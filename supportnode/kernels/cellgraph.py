@@ -14,24 +14,12 @@ from __future__ import annotations
 import numpy as np
 from numba import int64, njit, uint64
 
+from supportnode.kernels.offsets import FORWARD_26
 from supportnode.kernels.runtime import warmer
 from supportnode.kernels.windows import add_rows, dense_columns
 
 GOLDEN = 0x9E3779B97F4A7C15
 MOMENTS = 10  # count, x, y, z, xx, yy, zz, xy, xz, yz
-
-# The 13 forward offsets of the 26-neighbourhood (dx, dy, dz) > (0, 0, 0): each adjacent
-# pair once (shared with the objects' voxel linking, `geometry.objects.neighbours`).
-FORWARD_26 = np.array(
-    [
-        (dx, dy, dz)
-        for dx in (-1, 0, 1)
-        for dy in (-1, 0, 1)
-        for dz in (-1, 0, 1)
-        if (dx, dy, dz) > (0, 0, 0)
-    ],
-    dtype=np.int64,
-)
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -131,6 +131,5 @@ def _warm() -> None:
     label_edges(3, np.array([0]), np.array([2]))
     occupied = np.array([False, True, True, False])
     vid = np.array([0, 0, 1, 0], np.int32)
-    for support in (None, np.array([0, 1])):
+    for support in (None, np.array([0, 1])):  # one specialisation: occupied_voxels' int32 ids
         label_voxel_grid(np.array([1, 2]), occupied, vid, np.array([1]), support)
-    label_voxel_grid(np.array([1, 2]), occupied, vid.astype(np.int64), np.array([1]))

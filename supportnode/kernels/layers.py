@@ -169,7 +169,11 @@ def screen_levels(
         empty = np.zeros(0, np.int64)
         box = np.zeros((0, 2))
         return np.zeros(0), empty, empty.copy(), empty.copy(), np.zeros(0, bool), box, box.copy()
-    return _screen(z, xy, edges, float(clear), float(slab), int(min_window), min_up, min_out)
+    # Counts as float64 (exact for any count): an int or a float min_up would be two
+    # specialisations, each loaded from the cache (~8 ms) by a fresh process.
+    return _screen(
+        z, xy, edges, float(clear), float(slab), int(min_window), float(min_up), float(min_out)
+    )
 
 
 @warmer

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 from conftest import plane_points
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from supportnode.cli import _console, main
 from supportnode.io.clouds import write_ply
@@ -133,12 +135,21 @@ def test_progress_bar_on_a_terminal(monkeypatch) -> None:
     screen = io.StringIO()
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
     monkeypatch.setattr(
-        _console, "Console", lambda **kw: Console(file=screen, force_terminal=True, width=100)
+        _console, "make_console", lambda **kw: Console(file=screen, force_terminal=True, width=100)
     )
+    # A job done within _PLAIN_AFTER_S draws nothing.
     with _console.progress("sim kitchen", 3, "frames") as bar:
-        bar.advance(2)
+        bar.advance(3)
+    assert screen.getvalue() == "" and bar._bar is None
+    monkeypatch.setattr(_console, "_PLAIN_AFTER_S", 0.0)
+    with _console.progress("sim kitchen", 3, "frames") as bar:
+        bar.advance(1, "frame 1")
+        assert bar._timer is not None
+        bar._timer.join(timeout=10)  # the bar starts from what was done meanwhile
+        bar.advance(1)
         bar._bar.refresh()
     assert "sim kitchen" in screen.getvalue() and "2/3" in screen.getvalue()
+    assert "frame 1" in screen.getvalue()
 
 
 def test_single_cloud_ctrl_c_says_interrupted(tmp_path: Path, capsys, monkeypatch, rng) -> None:
@@ -154,3 +165,51 @@ def test_single_cloud_ctrl_c_says_interrupted(tmp_path: Path, capsys, monkeypatc
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"supportnode detect: interrupted while writing: partial output left in {out}/"]
     assert not out.exists()
+
+
+def _rich_table(columns, rows, left):
+    import io
+
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(box=None, pad_edge=False, title_justify="left", show_edge=False)
+    for i, name in enumerate(columns):
+        table.add_column(name, justify="left" if i < left else "right", no_wrap=True)
+    for row in rows:
+        table.add_row(*row)
+    screen = io.StringIO()
+    Console(file=screen, width=_console._PIPE_WIDTH, highlight=False).print(table)
+    return screen.getvalue()
+
+
+_CELL = st.text(alphabet=st.characters(min_codepoint=32, max_codepoint=126), max_size=12)
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    columns=st.lists(_CELL, min_size=1, max_size=6),
+    data=st.data(),
+)
+def test_plain_tables_in_pipes_are_what_rich_prints(columns, data) -> None:
+    n = len(columns)
+    rows = data.draw(st.lists(st.lists(_CELL, min_size=n, max_size=n), max_size=6))
+    left = data.draw(st.integers(0, n - 1))
+    got = _console.plain_table(columns, rows, None, left)
+    text = "".join(columns) + "".join(c for r in rows for c in r)
+    empty_column = any(not any(r[i] for r in [columns, *rows]) for i in range(n))
+    padded = any(c != c.strip() for r in [columns, *rows] for c in r)
+    if "[" in text or ":" in text or empty_column or padded:
+        assert got is None
+    else:
+        assert got == _rich_table(columns, rows, left)
+
+
+def test_plain_tables_leave_the_rest_to_rich(monkeypatch, capsys) -> None:
+    assert _console.plain_table(("a", "b"), [["1", "2"]], "title", 1) is None
+    assert _console.plain_table(("a", "b"), [["1", "2"]], None, 2) is None  # last column left
+    assert _console.plain_table(("a", "b"), [["é", "2"]], None, 1) is None
+    assert _console.plain_table(("a",), [["x" * 200]], None, 0) is None
+    monkeypatch.setattr(sys.stdout, "isatty", lambda: False)
+    _console.print_table(("surface", "points"), [(0, "108,920")])
+    assert capsys.readouterr().out == "surface   points\n0        108,920\n"

@@ -21,15 +21,13 @@ Pure: numpy in, labels out.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import ConvexHull
 
 from supportnode.geometry.objects.faces import Cells
 from supportnode.geometry.objects.split_footprint import split_raster
 from supportnode.kernels.components import label_edges
 from supportnode.kernels.footprint import fill_holes, label8
+from supportnode.kernels.morphology import distance_transform
 
 # A boundary is a crease when it has at least this many links and this share of them concave.
 _CREASE_LINKS = 10
@@ -197,7 +195,7 @@ def _bays(occ: np.ndarray) -> tuple[np.ndarray, float]:
     label, n = label8(bay_cells)
     depth = np.zeros(n)
     np.maximum.at(depth, label[bay_cells] - 1, to_edge[inside].min(axis=1))
-    return depth, float(ndimage.distance_transform_edt(occ).max()) - 0.5  # as split_raster
+    return depth, float(distance_transform(occ).max()) - 0.5  # as split_raster
 
 
 def _hidden(
@@ -295,6 +293,10 @@ def _part(
             a.append(local[x[touch]])
             b.append(np.full(int(touch.sum()), len(cells) + k))
     i, j = np.concatenate(a), np.concatenate(b)
+    # Imported here: only a bridge split gets this far; most detects never load csgraph.
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
     graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(m, m)).tocsr()
     seeds = np.arange(len(cells), m)
     _, _, nearest = dijkstra(

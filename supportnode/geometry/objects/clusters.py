@@ -15,8 +15,6 @@ Inputs cp (M, 3) float64 metres, z up; labels (M,) int64, -1 = none.
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from supportnode.geometry.objects.neighbours import FORWARD_26
@@ -46,6 +44,10 @@ def _cluster_knn(cp: np.ndarray, params: ObjectParams, stats: dict) -> np.ndarra
     sample = cp[sample_idx]
     tree = cKDTree(sample)
     k = min(params.k, n_s - 1)
+    # Imported here: a fresh detect that clusters by voxels (the default) never loads csgraph.
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     if k >= 1:
         _, nbr = tree.query(sample, k=k + 1, workers=-1)
         rows = np.repeat(np.arange(n_s), k)

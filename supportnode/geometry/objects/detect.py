@@ -35,7 +35,6 @@ from supportnode.geometry.objects.result import Components, ObjectResult, Segmen
 from supportnode.geometry.objects.split import _split_touching
 from supportnode.geometry.objects.support_lookup import _lookups, _support_below
 from supportnode.geometry.surfaces import SurfaceResult
-from supportnode.kernels.band import band_rows
 from supportnode.params import ObjectParams
 
 __all__ = [
@@ -245,6 +244,10 @@ def _claim_feet(
         for a in range(2):  # column by column: (M, 2) reductions are several times slower
             col = cp[:, a][obj]
             lo[a], hi[a] = col.min() - _AROUND, col.max() + _AROUND
+    # Imported here: only band-labelled surfaces (a depth camera's) get here, and
+    # `runtime.warm` loads the kernels of every imported kernel module (~4 ms each).
+    from supportnode.kernels.band import band_rows
+
     on = band_rows(pts, surfaces.labels, by_band, lo, hi, is_raised)
     loose = np.flatnonzero((lab < 0) & (support >= 0))
     loose = loose[by_band[support[loose]]]

@@ -12,12 +12,15 @@ sides of a crease the normals are then those of the faces, not their blend.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from supportnode.geometry.linalg import sym3_eigen_entries
-from supportnode.kernels.cellgraph import CellGrid, bin_points
 from supportnode.kernels.components import label_edges
+
+if TYPE_CHECKING:  # the kernels are imported by make_cells, on the clouds that need faces
+    from supportnode.kernels.cellgraph import CellGrid
 
 # Moment columns' (a, b) pairs in the order of linalg's entries (xx, yy, zz, xy, xz, yz).
 _OUTER = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -42,6 +45,10 @@ class Cells:
 
 def make_cells(pts: np.ndarray, size: float, pad: int) -> Cells:
     """The occupied ``size`` cells of (M, 3) points, metres, padded by ``pad`` cells."""
+    # Imported here, not with the module: only dense clouds (a depth camera's) grow faces, and
+    # `runtime.warm` loads the kernels of every imported kernel module (~4 ms each, 5 here).
+    from supportnode.kernels.cellgraph import bin_points
+
     grid, of_point, mom, base = bin_points(pts, size, pad)
     centroid = mom[:, 1:4] / mom[:, :1] + base
     return Cells(of_point, grid, mom, centroid, base, float(size))

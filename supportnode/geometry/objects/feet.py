@@ -82,9 +82,8 @@ def claim_raised(
     pot's inner bottom, to the pot); a patch touching no object is an object of its own (a
     sheet, a coaster) when it has ``min_points``, else stays none. New objects take labels
     above ``obj_label``'s."""
-    from scipy import ndimage
-
     from supportnode.kernels.footprint import label8
+    from supportnode.kernels.morphology import binary_dilation
 
     out = owner.copy()
     q = np.flatnonzero(raised & (out < 0))
@@ -109,7 +108,7 @@ def claim_raised(
     of_point = patches[qij[:, 0], qij[:, 1]]
     for p in range(1, n + 1):
         mine = q[of_point == p]
-        rim = ndimage.binary_dilation(patches == p, iterations=2) & (who >= 0)
+        rim = binary_dilation(binary_dilation(patches == p)) & (who >= 0)  # 2 iterations
         if rim.any():
             out[mine] = np.bincount(who[rim]).argmax()
         elif len(mine) >= min_points:

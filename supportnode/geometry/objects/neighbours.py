@@ -2,6 +2,6 @@
 
 from __future__ import annotations
 
-from supportnode.kernels.cellgraph import FORWARD_26
+from supportnode.kernels.offsets import FORWARD_26
 
 __all__ = ["FORWARD_26"]

@@ -10,10 +10,11 @@ empty footprint rasters of wall clusters.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+
+from supportnode.kernels.morphology import distance_transform
 
 # _edt_inner works on the occupied cells only of rasters of at least this many cells, at most
-# _EDT_SPARSE_MAX_FILL of them occupied (a ring of walls: 2-4 %); scipy's on the rest.
+# _EDT_SPARSE_MAX_FILL of them occupied (a ring of walls: 2-4 %); the whole transform on the rest.
 _EDT_SPARSE_MIN_CELLS = 16_384
 _EDT_SPARSE_MAX_FILL = 0.125
 
@@ -64,7 +65,7 @@ def _edt_inner(mask: np.ndarray, count: int | None = None) -> np.ndarray:
     if count is None:
         count = int(np.count_nonzero(mask))
     if mask.size < _EDT_SPARSE_MIN_CELLS or count > _EDT_SPARSE_MAX_FILL * mask.size:
-        return ndimage.distance_transform_edt(mask)
+        return distance_transform(mask)
     out = np.zeros(h * w)
     if count == 0:
         return out.reshape(h, w)

@@ -8,8 +8,6 @@ largest. See _split_concave.
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from supportnode.geometry.linalg import sym3_eigen
@@ -131,6 +129,10 @@ def _crease_components(
     crease[r[concave]] = True
     crease[c[concave]] = True
     keep = ~crease[r] & ~crease[c]
+    # Imported here: only a concave split gets this far; most detects never load csgraph.
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     graph = coo_matrix((np.ones(int(keep.sum()), dtype=np.int8), (r[keep], c[keep])), (nv, nv))
     _, comp = connected_components(graph.tocsr(), directed=False)
     comp[crease] = -1

@@ -11,7 +11,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from supportnode.geometry.objects.arrays import _col
@@ -23,6 +22,7 @@ from supportnode.geometry.objects.raster import (
     _true_box,
 )
 from supportnode.kernels.footprint import close3, fill_holes, footprint_raster, label8
+from supportnode.kernels.morphology import feature_transform
 
 # A split part must hold at least this fraction of the cluster's footprint cells.
 _SPLIT_MIN_FRACTION = 0.15
@@ -332,7 +332,7 @@ def _big_parts(occ: np.ndarray, n_cells: int, comp: np.ndarray, deep: np.ndarray
             big[parts - 1] = low >= need
             return big
     markers = np.where(deep[np.maximum(comp - 1, 0)] & (comp > 0), comp, 0)
-    _, (ni, nj) = ndimage.distance_transform_edt(markers == 0, return_indices=True)
+    ni, nj = feature_transform(markers == 0)
     owner = markers[ni, nj]  # nearest part of every cell
     area = np.bincount(owner[occ], minlength=n + 1)[1:]
     return deep & (area >= _SPLIT_MIN_FRACTION * n_cells)

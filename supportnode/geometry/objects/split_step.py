@@ -7,11 +7,11 @@ Points p (P, 3) float64 metres, z up; parts (P,) int64, 0 = the larger. See _spl
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from supportnode.geometry.objects.arrays import _cells_xy, _col
 from supportnode.kernels.components import label_edges
 from supportnode.kernels.footprint import close3, fill_holes
+from supportnode.kernels.morphology import binary_dilation, binary_erosion, feature_transform
 
 # Splitting at a step of the top height (see _split_step), metres and fractions: raster cell
 # = voxel_size; neighbouring cells whose tops differ by at most _STEP_LINK are one plateau;
@@ -139,12 +139,12 @@ def _beside_free(
     rim. solid: (H + 2, W + 2) bool, the closed, hole-filled footprint with an empty border."""
     h, w = solid.shape[0] - 2, solid.shape[1] - 2
     # Within two cells: a box's edge cells hold its sides' points, lower than its top.
-    near_free = ndimage.binary_dilation(~solid, structure=np.ones((5, 5), dtype=bool))[1:-1, 1:-1]
+    near_free = binary_dilation(~solid, np.ones((5, 5), dtype=bool))[1:-1, 1:-1]
     for k in big:  # two plateaus
         mine_flat = np.zeros(h * w, dtype=bool)
         mine_flat[cells[plateau == k]] = True
         mine = mine_flat.reshape(h, w)
-        rim = mine & ~ndimage.binary_erosion(mine, np.ones((3, 3), dtype=bool), border_value=0)
+        rim = mine & ~binary_erosion(mine, np.ones((3, 3), dtype=bool), border_value=False)
         if (rim & near_free).sum() < _STEP_RIM_FREE * rim.sum():
             return False
     return True
@@ -167,5 +167,5 @@ def _by_level(p: np.ndarray, lo: np.ndarray, cell: float, level: np.ndarray) -> 
     mark = mark.reshape(fh, fw)
     if not mark.any():
         return None
-    _, (ni, nj) = ndimage.distance_transform_edt(mark == 0, return_indices=True)
+    ni, nj = feature_transform(mark == 0)
     return mark[ni, nj].ravel()[fkey] - 1

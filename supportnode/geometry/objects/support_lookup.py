@@ -15,11 +15,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.footprint import fill_holes
 from supportnode.kernels.lookup import cluster_bottoms, lowest_per_cell, table_lookup
+from supportnode.kernels.morphology import binary_closing, binary_dilation
 
 # Points within this of a cluster's (robust) bottom are its "lowest points" for the support lookup.
 _BOTTOM_BAND = 0.02
@@ -240,13 +240,13 @@ class _SupportLookup:
             mask = _close_notches(mask, self.cell)
         mask = fill_holes(mask)
         if dilate:
-            mask = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool))
+            mask = binary_dilation(mask, np.ones((3, 3), dtype=bool))
         self.mask = mask
 
     def dilated(self) -> _SupportLookup:
         """This lookup with its footprint dilated by one cell, as ``dilate=True`` builds it."""
         out = copy.copy(self)
-        out.mask = ndimage.binary_dilation(self.mask, structure=np.ones((3, 3), dtype=bool))
+        out.mask = binary_dilation(self.mask, np.ones((3, 3), dtype=bool))
         return out
 
     def over_cells(self, ij: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
@@ -275,7 +275,7 @@ def _close_notches(mask: np.ndarray, cell: np.ndarray) -> np.ndarray:
     disc = (ii / r[0]) ** 2 + (jj / r[1]) ** 2 <= 1.0
     pad = np.zeros((mask.shape[0] + 2 * r[0], mask.shape[1] + 2 * r[1]), dtype=bool)
     pad[r[0] : -r[0], r[1] : -r[1]] = mask
-    closed = ndimage.binary_closing(pad, structure=disc)
+    closed = binary_closing(pad, disc)
     return mask | closed[r[0] : -r[0], r[1] : -r[1]]
 
 

@@ -24,7 +24,6 @@ from supportnode.geometry.surfaces.planar import (
     _Planes,
 )
 from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
-from supportnode.kernels.band import column_sums, points_in_columns
 from supportnode.kernels.components import label_edges
 from supportnode.params import SurfaceParams
 
@@ -286,6 +285,10 @@ def drop_raised(
     none = np.zeros(0, np.int64)
     if not band.by_band.any():
         return none
+    # Imported here: only a depth camera's surfaces are labelled by their band, and
+    # `runtime.warm` loads the kernels of every imported kernel module (~4 ms each).
+    from supportnode.kernels.band import column_sums, points_in_columns
+
     # Columns within each voxel (a whole number of them per voxel edge): grouped without a
     # sort, by the voxel and the column's place in it.
     per = np.maximum(np.round(grid.size[:2] / cell).astype(np.int64), 1)

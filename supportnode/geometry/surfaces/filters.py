@@ -6,12 +6,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import ndimage
 
 from supportnode.geometry.surfaces.groups import _components, _median_by_group
 from supportnode.geometry.surfaces.planar import _Planes
 from supportnode.geometry.surfaces.result import Surface
 from supportnode.geometry.voxels import VoxelGrid
+from supportnode.kernels.footprint import fill_holes
+from supportnode.kernels.morphology import binary_closing, binary_erosion, binary_opening
 from supportnode.params import SurfaceParams
 
 # A raised piece of a surface is an object lying on it only when the surface's main piece
@@ -395,6 +396,6 @@ def _inner_footprint(
     f = np.floor((xy - origin) / cell).astype(np.int64)
     img = np.zeros((int(f[:, 1].max()) + 3, int(f[:, 0].max()) + 3), dtype=bool)
     img[f[:, 1], f[:, 0]] = True
-    img = ndimage.binary_fill_holes(ndimage.binary_closing(img))
-    img = ndimage.binary_erosion(ndimage.binary_opening(img))
+    img = fill_holes(binary_closing(img))
+    img = binary_erosion(binary_opening(img))
     return (img if img.any() else None), (origin, cell)

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from supportnode.geometry.surfaces.groups import _components
+from supportnode.kernels.morphology import distance_transform
 
 
 def _cells_key(cells: np.ndarray) -> bytes:
@@ -44,7 +44,7 @@ def footprint_widths(cells_list: list[np.ndarray], cell_size: tuple[float, float
     if len(cells_list) == 0:
         return out
     for members, img, first_row in _stacked_rasters(cells_list, upsample=2):
-        dist = ndimage.distance_transform_edt(img)
+        dist = distance_transform(img)
         out[members] = np.maximum.reduceat(dist.max(axis=1), first_row[:-1])
     return out * min(cell_size)
 

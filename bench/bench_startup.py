@@ -1,0 +1,72 @@
+"""Wall time of a fresh ``supportnode detect`` process on one cloud, numba's cache warm.
+
+What a user waits for when they run the command on a file (issue 20: at most 0.55-0.72 s on
+the 150,000-point shelf): interpreter start, imports, compiled kernels loaded from the cache,
+reading, detecting, writing ``--out`` and exiting. One untimed run first (it compiles what the
+cache lacks: a fresh checkout takes ~30 s), then ``--runs`` timed ones; also the time of a
+process that only imports what ``detect`` imports. Prints a table and one JSON line (medians,
+s) for bench/ab.py; ``--docs`` writes the table into docs/performance.md.
+
+    python bench/bench_startup.py [--runs 5] [--align] [--docs] [CLOUD]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import docs_command, host_load, table, write_docs_block
+
+REPO = Path(__file__).resolve().parents[1]
+DOCS = REPO / "docs" / "performance.md"
+SHELF = REPO / "sim_scans" / "shelf_sampled.ply"
+IMPORTS = "import supportnode.cli.detect, supportnode.pipeline, supportnode.io.results"
+
+
+def wall(cmd: list[str]) -> float:
+    """Seconds from starting ``cmd`` to its exit (its output discarded)."""
+    t = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("cloud", nargs="?", default=str(SHELF), help="default: the shelf, 150k")
+    ap.add_argument("--runs", type=int, default=5, help="timed runs of each (median)")
+    ap.add_argument("--align", action="store_true", help="detect --align (a camera's cloud)")
+    ap.add_argument("--docs", action="store_true", help=f"write the table into {DOCS}")
+    args = ap.parse_args()
+    load = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="bench-startup-") as out:
+        detect = [sys.executable, "-m", "supportnode", "detect", args.cloud, "--out", out]
+        detect += ["--align"] if args.align else []
+        wall(detect)  # fills numba's cache when it lacks a kernel
+        times: dict[str, list[float]] = {"detect": [], "imports": []}
+        for _ in range(args.runs):  # by turns: drift falls on both alike
+            times["detect"].append(wall(detect))
+            times["imports"].append(wall([sys.executable, "-c", IMPORTS]))
+    medians = {k: round(statistics.median(v), 4) for k, v in times.items()}
+    rows = [[k, medians[k], min(v), max(v)] for k, v in times.items()]
+    what = f"fresh processes on {Path(args.cloud).name}{' --align' if args.align else ''}"
+    text = f"{what}, {args.runs} runs, warm cache\n\n" + table(
+        rows, ["process", "median s", "min s", "max s"]
+    )
+    print(text)
+    print(json.dumps({"startup": medians}))
+    if args.docs:
+        command = docs_command("bench_startup.py", sys.argv[1:])
+        write_docs_block(DOCS, "bench_startup", text, command, host_load(load))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
