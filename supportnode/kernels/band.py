@@ -184,6 +184,34 @@ def band_rows(
     return _band_rows(pts, lab, np.asarray(use, np.bool_), *box, np.asarray(always, np.bool_))
 
 
+@njit(cache=True, nogil=True)
+def _label_voxel_counts(
+    labels: np.ndarray, at: np.ndarray, vox: np.ndarray, n_comp: int, n_vox: int, dense: bool
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    count = np.zeros(n_comp, np.int64)
+    w = np.zeros(n_comp * n_vox if dense else 0, np.int64)
+    for k in range(at.size):
+        c = labels[at[k]]
+        if c >= n_comp:
+            return count, w, False
+        count[c] += 1
+        if dense:
+            w[c * n_vox + vox[k]] += 1
+    return count, w, True
+
+
+def label_voxel_counts(
+    labels: np.ndarray, at: np.ndarray, vox: np.ndarray, n_comp: int, n_vox: int, dense: bool
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Points per label (n_comp,) int64 of the labelled points at positions ``at`` (K,) of
+    ``labels`` (N,) (each >= 0), and with ``dense`` per (label, voxel) as one (n_comp * n_vox,)
+    int64 table (``label * n_vox + vox``; ``vox`` (K,) each point's voxel), else an empty one:
+    what ``np.bincount`` of the labels and of those keys gives. None when a label is not
+    below n_comp."""
+    count, w, ok = _label_voxel_counts(labels, at, vox, int(n_comp), int(n_vox), bool(dense))
+    return (count, w) if ok else None
+
+
 @warmer
 def _warm() -> None:
     starts, counts = np.array([0]), np.array([2])
@@ -192,3 +220,5 @@ def _warm() -> None:
     column_sums(starts, counts, local, size, np.array([0, 0]), use, np.ones(2), per)
     points_in_columns(starts, counts, local, size, np.array([0, 0]), use, np.ones(4, bool), per)
     band_rows(np.zeros((1, 3)), np.array([0]), use, np.zeros(2), np.ones(2), np.zeros(1, bool))
+    lab = np.array([0, -1, 1], np.int32)
+    label_voxel_counts(lab, np.array([0, 2]), np.array([0, 1]), 2, 2, True)

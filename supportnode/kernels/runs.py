@@ -67,6 +67,49 @@ def _range_extremes(
     return lo, hi
 
 
+@njit(cache=True, nogil=True)
+def _labelled(
+    labels: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    total = 0
+    for i in range(labels.size):
+        total += labels[i] >= 0
+    at = np.empty(total, np.int64)
+    vox = np.empty(total, np.int64)
+    per = np.zeros(starts.size, np.int64)
+    last = np.full(starts.size, -1, np.int64)
+    m = 0
+    for v in range(starts.size):
+        for i in range(starts[v], starts[v] + counts[v]):
+            if labels[i] >= 0:
+                at[m], vox[m] = i, v
+                m += 1
+                last[v] = labels[i]
+        per[v] = m
+    # Counts from the running total (no increment through memory per point).
+    for v in range(starts.size - 1, 0, -1):
+        per[v] -= per[v - 1]
+    return at, vox, per, last
+
+
+def labelled(
+    labels: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The labelled points (``labels`` >= 0) of (N,) labels in the order of V contiguous
+    ranges ``starts[v] : starts[v] + counts[v]`` that tile 0 .. N - 1 in order (a voxel
+    grid's): their positions (K,) ascending, each one's range (K,), and per range (V,) how
+    many and the last one's label (-1: none), all int64. Raises ValueError on shapes or
+    ranges that do not tile the labels."""
+    lab = np.ascontiguousarray(labels).ravel()
+    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
+    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
+    if len(s) != len(c):
+        raise ValueError("starts and counts differ in length")
+    if int(c.sum()) != len(lab) or (len(s) and (s[0] != 0 or (s[1:] != (s + c)[:-1]).any())):
+        raise ValueError("the ranges must tile the labels in order")
+    return _labelled(lab, s, c)
+
+
 def _columns(local: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
     if not (lx.ndim == ly.ndim == lz.ndim == 1 and len(lx) == len(ly) == len(lz)):
@@ -118,3 +161,4 @@ def _warm() -> None:
     cols = [np.arange(3.0), np.zeros(3), np.ones(3)]
     run_moments(cols, np.array([0, 2]), np.array([0, 1]))
     range_extremes(cols, np.array([0]), np.array([3]))
+    labelled(np.array([0, -1, 1], np.int32), np.array([0, 2]), np.array([2, 1]))

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from supportnode.kernels import runtime
-from supportnode.kernels.runs import _warm, range_extremes, run_moments
+from supportnode.kernels.runs import _warm, labelled, range_extremes, run_moments
 
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -74,3 +74,39 @@ def test_bad_input_is_rejected_before_the_loop():
 def test_warm_up_is_registered():
     assert _warm in runtime._WARMERS
     _warm()
+
+
+@settings(max_examples=80, deadline=None)
+@given(n_vox=st.integers(0, 30), seed=st.integers(0, 10_000))
+def test_labelled_matches_numpy(n_vox, seed):
+    # Voxels of 1 to 20 points tiling the labels (a grid's order), some labelled, some not.
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(1, 21, n_vox)
+    starts = np.cumsum(counts) - counts
+    labels = rng.integers(-1, 4, int(counts.sum())).astype(np.int32)
+    labels[rng.random(len(labels)) < rng.uniform(0, 1)] = -1
+    at, vox, per, last = labelled(labels, starts, counts)
+    want = np.flatnonzero(labels >= 0)
+    np.testing.assert_array_equal(at, want)
+    np.testing.assert_array_equal(vox, np.repeat(np.arange(n_vox), counts)[want])
+    np.testing.assert_array_equal(per, np.bincount(vox, minlength=n_vox))
+    for v in range(n_vox):
+        mine = labels[starts[v] : starts[v] + counts[v]]
+        on = mine[mine >= 0]
+        assert last[v] == (on[-1] if len(on) else -1)
+
+
+def test_labelled_edges_and_bad_ranges():
+    at, vox, per, last = labelled(np.zeros(0, np.int32), np.zeros(0, int), np.zeros(0, int))
+    assert len(at) == len(vox) == len(per) == len(last) == 0
+    at, vox, per, last = labelled(np.array([5]), np.array([0]), np.array([1]))
+    assert at.tolist() == [0] and vox.tolist() == [0] and per.tolist() == [1]
+    assert last.tolist() == [5]
+    at, _, per, last = labelled(np.array([-1, -1]), np.array([0]), np.array([2]))
+    assert len(at) == 0 and per.tolist() == [0] and last.tolist() == [-1]
+    with pytest.raises(ValueError, match="tile"):
+        labelled(np.zeros(3, np.int32), np.array([0, 1]), np.array([1, 1]))
+    with pytest.raises(ValueError, match="tile"):
+        labelled(np.zeros(3, np.int32), np.array([0, 2]), np.array([1, 2]))
+    with pytest.raises(ValueError, match="length"):
+        labelled(np.zeros(3, np.int32), np.array([0]), np.array([1, 2]))
