@@ -74,22 +74,28 @@ def _labelled(
     total = 0
     for i in range(labels.size):
         total += labels[i] >= 0
-    at = np.empty(total, np.int64)
-    vox = np.empty(total, np.int64)
+    # One slot past the end: every point is written, only a labelled one kept (no branch
+    # per point: a depth image's labels change from point to point, and mispredicted
+    # branches cost more than the writes).
+    at = np.empty(total + 1, np.int64)
+    vox = np.empty(total + 1, np.int64)
     per = np.zeros(starts.size, np.int64)
     last = np.full(starts.size, -1, np.int64)
     m = 0
     for v in range(starts.size):
+        keep = np.int64(-1)
         for i in range(starts[v], starts[v] + counts[v]):
-            if labels[i] >= 0:
-                at[m], vox[m] = i, v
-                m += 1
-                last[v] = labels[i]
+            lab = np.int64(labels[i])
+            at[m], vox[m] = i, v
+            on = lab >= 0
+            m += on
+            keep = lab if on else keep
+        last[v] = keep
         per[v] = m
-    # Counts from the running total (no increment through memory per point).
+    # Counts from the running total.
     for v in range(starts.size - 1, 0, -1):
         per[v] -= per[v - 1]
-    return at, vox, per, last
+    return at[:total], vox[:total], per, last
 
 
 def labelled(
@@ -108,6 +114,72 @@ def labelled(
     if int(c.sum()) != len(lab) or (len(s) and (s[0] != 0 or (s[1:] != (s + c)[:-1]).any())):
         raise ValueError("the ranges must tile the labels in order")
     return _labelled(lab, s, c)
+
+
+@njit(cache=True, nogil=True)
+def _label_runs(
+    labels: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    # Branch-free per point (as `_labelled`): labels change from point to point.
+    nv = starts.size
+    pure = np.zeros(nv, np.bool_)
+    first = np.zeros(nv, np.int64)
+    big = np.int64(1) << 62
+    top = np.int64(-1)
+    n_mixed = 0
+    for v in range(nv):
+        k, lo, hi = 0, big, np.int64(-1)
+        for i in range(starts[v], starts[v] + counts[v]):
+            lab = np.int64(labels[i])
+            on = lab >= 0
+            k += on
+            lo = min(lo, lab if on else big)
+            hi = max(hi, lab)
+        pure[v] = k > 0 and k == counts[v] and lo == hi
+        first[v] = lo
+        top = max(top, hi)
+        n_mixed += 0 if pure[v] else k
+    present = np.zeros(top + 2, np.int64)  # a last slot for the unlabelled
+    idx = np.empty(n_mixed + 1, np.int64)
+    run = np.empty(n_mixed + 1, np.int64)
+    run_lab = np.empty(n_mixed + 1, np.int64)
+    run_vox = np.empty(n_mixed + 1, np.int64)
+    m = r = 0
+    for v in range(nv):
+        if pure[v]:
+            present[first[v]] += counts[v]
+            continue
+        prev = np.int64(-1)
+        for i in range(starts[v], starts[v] + counts[v]):
+            lab = np.int64(labels[i])
+            on = lab >= 0
+            present[lab if on else top + 1] += 1
+            # A new run at the voxel's first labelled point, or at a new label.
+            run[r], run_lab[r], run_vox[r] = m, lab, v
+            r += on and lab != prev
+            prev = lab if on else prev
+            idx[m] = i
+            m += on
+    return pure, present[: top + 1], idx[:m], run[:r], run_lab[:r], run_vox[:r]
+
+
+def label_runs(
+    labels: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Runs of one label in V contiguous ranges (a voxel grid's voxels, see `labelled`) of
+    (N,) labels (-1: none). Returns whether each range is pure (V,) bool (all its points
+    carry one label); then, int64, the points per label (L,) (``np.bincount`` of the labels
+    >= 0); and of the other ranges with labelled points, those points' positions (K,) in
+    order, runs of one label in one range as starts into them (R,), and each run's label
+    (R,) and range (R,)."""
+    lab = np.ascontiguousarray(labels).ravel()
+    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
+    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
+    if len(s) != len(c):
+        raise ValueError("starts and counts differ in length")
+    if int(c.sum()) != len(lab) or (len(s) and (s[0] != 0 or (s[1:] != (s + c)[:-1]).any())):
+        raise ValueError("the ranges must tile the labels in order")
+    return _label_runs(lab, s, c)
 
 
 def _columns(local: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -162,3 +234,4 @@ def _warm() -> None:
     run_moments(cols, np.array([0, 2]), np.array([0, 1]))
     range_extremes(cols, np.array([0]), np.array([3]))
     labelled(np.array([0, -1, 1], np.int32), np.array([0, 2]), np.array([2, 1]))
+    label_runs(np.array([0, -1, 1], np.int32), np.array([0, 2]), np.array([2, 1]))

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from supportnode.kernels import runtime
-from supportnode.kernels.runs import _warm, labelled, range_extremes, run_moments
+from supportnode.kernels.runs import _warm, label_runs, labelled, range_extremes, run_moments
 
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -110,3 +110,51 @@ def test_labelled_edges_and_bad_ranges():
         labelled(np.zeros(3, np.int32), np.array([0, 2]), np.array([1, 2]))
     with pytest.raises(ValueError, match="length"):
         labelled(np.zeros(3, np.int32), np.array([0]), np.array([1, 2]))
+
+
+@settings(max_examples=80, deadline=None)
+@given(n_vox=st.integers(0, 30), share=st.floats(0, 1), seed=st.integers(0, 10_000))
+def test_label_runs_match_numpy(n_vox, share, seed):
+    # The numpy reduction it replaced: voxels whose points are all labelled alike are pure;
+    # in the others, runs of one label among the labelled points, voxel by voxel.
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(1, 16, n_vox)
+    starts = np.cumsum(counts) - counts
+    labels = rng.integers(0, 3, int(counts.sum())).astype(np.int32)
+    labels[rng.random(len(labels)) < share] = -1
+    whole = rng.random(n_vox) < 0.5  # voxels of one label throughout
+    for v in np.flatnonzero(whole):
+        labels[starts[v] : starts[v] + counts[v]] = rng.integers(0, 3)
+    pure, present, idx, run, run_lab, run_vox = label_runs(labels, starts, counts)
+    at = np.flatnonzero(labels >= 0)
+    lab = labels[at].astype(np.int64)
+    np.testing.assert_array_equal(present, np.bincount(lab) if len(at) else np.zeros(0, int))
+    at_vox = np.repeat(np.arange(n_vox), counts)[at]
+    want_pure = np.zeros(n_vox, bool)
+    for v in range(n_vox):
+        mine = labels[starts[v] : starts[v] + counts[v]]
+        want_pure[v] = (mine >= 0).all() and len(set(mine.tolist())) == 1
+    np.testing.assert_array_equal(pure, want_pure)
+    mixed = ~want_pure[at_vox]
+    np.testing.assert_array_equal(idx, at[mixed])
+    g, vox = lab[mixed], at_vox[mixed]
+    cut = np.r_[True, (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])] if len(g) else np.zeros(0, bool)
+    want_run = np.flatnonzero(cut)
+    np.testing.assert_array_equal(run, want_run)
+    np.testing.assert_array_equal(run_lab, g[want_run])
+    np.testing.assert_array_equal(run_vox, vox[want_run])
+
+
+def test_label_runs_edges():
+    pure, present, idx, run, *_ = label_runs(
+        np.zeros(0, np.int32), np.zeros(0, int), np.zeros(0, int)
+    )
+    assert len(pure) == len(present) == len(idx) == len(run) == 0
+    pure, present, idx, run, run_lab, run_vox = label_runs(np.array([2, -1, 2]), [0], [3])
+    assert run_vox.tolist() == [0]
+    assert pure.tolist() == [False] and present.tolist() == [0, 0, 2]
+    assert idx.tolist() == [0, 2] and run.tolist() == [0] and run_lab.tolist() == [2]
+    pure, present, idx, *_ = label_runs(np.array([1, 1]), [0], [2])
+    assert pure.tolist() == [True] and present.tolist() == [0, 2] and len(idx) == 0
+    with pytest.raises(ValueError, match="tile"):
+        label_runs(np.zeros(3, np.int32), np.array([1]), np.array([3]))
