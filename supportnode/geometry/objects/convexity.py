@@ -115,7 +115,8 @@ def _face_normals(cells: Cells, face: np.ndarray) -> np.ndarray:
     """(n_faces, 3) unit normal of the plane fitted to each face's points (sign arbitrary)."""
     on = face >= 0
     n = int(face.max()) + 1
-    mom = np.stack([np.bincount(face[on], cells.moments[on, q], n) for q in range(10)], 1)
+    f_on, m_on = face[on], cells.moments[on]  # gathered once, not once per moment
+    mom = np.stack([np.bincount(f_on, m_on[:, q], n) for q in range(10)], 1)
     count = np.maximum(mom[:, 0], 1.0)
     mean = [mom[:, 1 + a] / count for a in range(3)]
     pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
