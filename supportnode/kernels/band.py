@@ -127,6 +127,10 @@ def _in_columns(
     out = np.empty(lx.size, np.int64)
     m = 0
     for v in range(starts.size):
+        # Only the voxels with a flagged column (a few: raised patches are small).
+        base = v * per0 * per1
+        if not flagged[base : base + per0 * per1].any():
+            continue
         for i in range(starts[v], starts[v] + counts[v]):
             lab = labels[i]
             if lab < 0 or not use[lab]:

@@ -182,6 +182,39 @@ def label_runs(
     return _label_runs(lab, s, c)
 
 
+@njit(cache=True, nogil=True)
+def _newly_labelled(
+    labels: np.ndarray, before: np.ndarray, starts: np.ndarray, counts: np.ndarray, n: int
+) -> np.ndarray:
+    top = n - 1
+    for r in range(starts.size):
+        for i in range(starts[r], starts[r] + counts[r]):
+            if labels[i] >= 0 and before[i] < 0:
+                top = max(top, np.int64(labels[i]))
+    out = np.zeros(top + 1, np.int64)
+    for r in range(starts.size):
+        for i in range(starts[r], starts[r] + counts[r]):
+            if labels[i] >= 0 and before[i] < 0:
+                out[labels[i]] += 1
+    return out
+
+
+def newly_labelled(
+    labels: np.ndarray, before: np.ndarray, starts: np.ndarray, counts: np.ndarray, n: int
+) -> np.ndarray:
+    """Per label, how many points of the disjoint ranges ``starts[r] : starts[r] + counts[r]``
+    carry it in ``labels`` (N,) and carried none (-1) in ``before`` (N,): ``np.bincount`` of
+    those labels with ``minlength`` n (int64), read only in the ranges (the points that can
+    have changed)."""
+    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
+    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
+    if len(labels) != len(before) or len(s) != len(c):
+        raise ValueError("labels and before, starts and counts must match in length")
+    if len(s) and ((s < 0).any() or (c < 0).any() or (s + c > len(labels)).any()):
+        raise ValueError("a range lies outside the labels")
+    return _newly_labelled(labels, before, s, c, int(n))
+
+
 def _columns(local: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
     if not (lx.ndim == ly.ndim == lz.ndim == 1 and len(lx) == len(ly) == len(lz)):
@@ -235,3 +268,5 @@ def _warm() -> None:
     range_extremes(cols, np.array([0]), np.array([3]))
     labelled(np.array([0, -1, 1], np.int32), np.array([0, 2]), np.array([2, 1]))
     label_runs(np.array([0, -1, 1], np.int32), np.array([0, 2]), np.array([2, 1]))
+    lab = np.array([0, -1, 1], np.int32)
+    newly_labelled(lab, lab.copy(), np.array([0, 2]), np.array([2, 1]), 2)

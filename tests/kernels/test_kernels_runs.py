@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from supportnode.kernels import runtime
-from supportnode.kernels.runs import _warm, label_runs, labelled, range_extremes, run_moments
+from supportnode.kernels.runs import (
+    _warm,
+    label_runs,
+    labelled,
+    newly_labelled,
+    range_extremes,
+    run_moments,
+)
 
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
@@ -158,3 +167,28 @@ def test_label_runs_edges():
     assert pure.tolist() == [True] and present.tolist() == [0, 2] and len(idx) == 0
     with pytest.raises(ValueError, match="tile"):
         label_runs(np.zeros(3, np.int32), np.array([1]), np.array([3]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 300), n_min=st.integers(0, 8), seed=st.integers(0, 10_000))
+def test_newly_labelled_counts_the_changed_points_of_the_ranges(n, n_min, seed):
+    rng = np.random.default_rng(seed)
+    before = rng.integers(-1, 5, n).astype(np.int32)
+    labels = before.copy()
+    cuts = np.unique(np.r_[0, np.sort(rng.integers(0, n + 1, 6)), n])
+    ranges = [(a, b - a) for a, b in itertools.pairwise(cuts)]
+    chosen = [r for r in ranges if rng.random() < 0.6]
+    for a, c in chosen:  # only the chosen ranges change
+        labels[a : a + c] = np.where(rng.random(c) < 0.5, rng.integers(-1, 7, c), labels[a : a + c])
+    starts = np.array([a for a, _ in chosen], np.int64)
+    counts = np.array([c for _, c in chosen], np.int64)
+    got = newly_labelled(labels, before, starts, counts, n_min)
+    want = np.bincount(labels[(labels >= 0) & (before < 0)], minlength=n_min)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_newly_labelled_refuses_ranges_outside():
+    lab = np.zeros(3, np.int32)
+    with pytest.raises(ValueError, match="outside"):
+        newly_labelled(lab, lab, np.array([2]), np.array([2]), 1)
+    assert newly_labelled(lab, lab, np.zeros(0, int), np.zeros(0, int), 2).tolist() == [0, 0]

@@ -147,8 +147,11 @@ def label_ring(
     if len(vsel):
         surf = surface_of_voxel[t]
         _label_by_plane_of(grid, planes, t, vsel, surf, band.width(surf, vsel), labels, best, True)
-    new = labels[(labels >= 0) & (before < 0)]
-    return np.bincount(new, minlength=len(kept))
+    # Only the voxels labelled in can hold new labels: counted there (compiled), not over all.
+    from supportnode.kernels.runs import newly_labelled
+
+    touched = np.unique(vsel)
+    return newly_labelled(labels, before, grid.starts[touched], grid.counts[touched], len(kept))
 
 
 # A voxel's own plane leaving its window's by more than this many noise sigmas is not the
