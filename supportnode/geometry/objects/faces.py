@@ -131,7 +131,11 @@ def attach(
     a = np.concatenate([src, dst])
     b = np.concatenate([dst, src])
     for _ in range(_ATTACH_ROUNDS):
-        pick = (face[a] < 0) & (face[b] >= 0)
+        # Only the links from cells still without a face (a cell once given one keeps it):
+        # the list shrinks round by round, in its order, so ties fall as before.
+        still = face[a] < 0
+        a, b = a[still], b[still]
+        pick = face[b] >= 0
         if not pick.any():
             break
         u, v = a[pick], b[pick]
