@@ -127,29 +127,93 @@ def _window_sums(
     same: bool,
     at: np.ndarray,
 ) -> np.ndarray:
-    # Per cell, the (2w + 1)^2 columns around it, each looked up once and its cells within w
-    # in k read in ascending k: the same cells in the same order (dx, dy, dz ascending) as
-    # (2w + 1)^3 lookups of single cells, so the same sums to the bit. The columns come from
-    # a dense table where the cells' box allows one: a row of dy's columns then lies in one
-    # or two cache lines, where each hashed lookup was a chain of dependent reads.
+    # Per cell, the (2w + 1)^2 columns around it, its cells within w in k read in ascending
+    # k: the same cells in the same order (dx, dy, dz ascending) as (2w + 1)^3 lookups of
+    # single cells, so the same sums to the bit. Cells are taken column by column, in
+    # ascending k: a column's neighbour columns are looked up once for all its cells, and in
+    # each the first cell at k - w or above only moves up (no bisection per cell). The
+    # columns come from a dense table where the cells' box allows one (a row of dy's columns
+    # then lies in one or two cache lines), else from hashed lookups.
     tk, tv, shift, start, cells = _columns(ijk, dims)
     dense, di, dj, width = dense_columns(ijk, start, cells, w)
+    slot = np.full(ijk.shape[0], -1, np.int64)  # each cell's row of the output, -1: none
+    for r in range(at.size):
+        if slot[at[r]] >= 0:  # a cell asked for twice: cell by cell
+            return _window_sums_each(ijk, dims, mom, w, label, same, at)
+        slot[at[r]] = r
     out = np.zeros((at.size, mom.shape[1]))
-    idx = np.empty((2 * w + 1) ** 3, np.int64)  # the cells of one window, in order
+    # The cells' k and label in column order: read without going through the cell index.
+    kk = np.empty(cells.size, np.int64)
+    ll = np.empty(cells.size, np.int64)
+    for u in range(cells.size):
+        kk[u], ll[u] = ijk[cells[u], 2], label[cells[u]]
+    side = 2 * w + 1
+    idx = np.empty(side**3, np.int64)  # the cells of one window, in order
+    nbr = np.empty(side * side, np.int64)  # a column's neighbour columns, -1: none
+    ptr = np.empty(side * side, np.int64)  # in each, the first cell not below the window
+    for col in range(start.size - 1):
+        wanted = False
+        for t in range(start[col], start[col + 1]):
+            wanted = wanted or slot[cells[t]] >= 0
+        if not wanted:
+            continue
+        c0 = cells[start[col]]
+        m = 0
+        for dx in range(-w, w + 1):
+            for dy in range(-w, w + 1):
+                if dense.size:
+                    q = dense[(ijk[c0, 0] + dx - di) * width + ijk[c0, 1] + dy - dj]
+                else:
+                    q = _find(tk, tv, shift, (ijk[c0, 0] + dx) * dims[1] + ijk[c0, 1] + dy)
+                nbr[m] = q
+                ptr[m] = start[q] if q >= 0 else 0
+                m += 1
+        for t in range(start[col], start[col + 1]):
+            c = cells[t]
+            if slot[c] < 0:
+                continue
+            k_lo, k_hi, own = ijk[c, 2] - w, ijk[c, 2] + w, label[c]
+            n = 0
+            for m in range(side * side):
+                q = nbr[m]
+                if q < 0:
+                    continue
+                p, end = ptr[m], start[q + 1]
+                while p < end and kk[p] < k_lo:
+                    p += 1
+                ptr[m] = p
+                while p < end and kk[p] <= k_hi:
+                    idx[n] = cells[p]
+                    n += not same or ll[p] == own
+                    p += 1
+            add_rows(mom, idx, n, out[slot[c]])
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _window_sums_each(
+    ijk: np.ndarray,
+    dims: np.ndarray,
+    mom: np.ndarray,
+    w: int,
+    label: np.ndarray,
+    same: bool,
+    at: np.ndarray,
+) -> np.ndarray:
+    # `_window_sums` cell by cell, each cell's columns looked up by hash and bisected: for
+    # cells asked for more than once.
+    tk, tv, shift, start, cells = _columns(ijk, dims)
+    out = np.zeros((at.size, mom.shape[1]))
+    idx = np.empty((2 * w + 1) ** 3, np.int64)
     for r in range(at.size):
         c = at[r]
         k_lo, k_hi = ijk[c, 2] - w, ijk[c, 2] + w
         n = 0
         for dx in range(-w, w + 1):
             for dy in range(-w, w + 1):
-                if dense.size:
-                    q = dense[(ijk[c, 0] + dx - di) * width + ijk[c, 1] + dy - dj]
-                else:
-                    q = _find(tk, tv, shift, (ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy)
+                q = _find(tk, tv, shift, (ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy)
                 if q < 0:
                     continue
-                # From the column's first cell at k_lo or above, by bisection: a column
-                # holds several times the window's cells on an object's side.
                 lo, hi = start[q], start[q + 1]
                 while lo < hi:
                     mid = (lo + hi) >> 1
