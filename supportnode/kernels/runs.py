@@ -76,20 +76,27 @@ def _labelled(
         total += labels[i] >= 0
     # One slot past the end: every point is written, only a labelled one kept (no branch
     # per point: a depth image's labels change from point to point, and mispredicted
-    # branches cost more than the writes).
+    # branches cost more than the writes); a branch where labels are few or most points
+    # carry one (a map's: predictable, and the writes would be the cost).
     at = np.empty(total + 1, np.int64)
     vox = np.empty(total + 1, np.int64)
     per = np.zeros(starts.size, np.int64)
     last = np.full(starts.size, -1, np.int64)
+    mixed = 10 * total > labels.size and 10 * total < 9 * labels.size
     m = 0
     for v in range(starts.size):
         keep = np.int64(-1)
         for i in range(starts[v], starts[v] + counts[v]):
             lab = np.int64(labels[i])
-            at[m], vox[m] = i, v
-            on = lab >= 0
-            m += on
-            keep = lab if on else keep
+            if mixed:
+                at[m], vox[m] = i, v
+                on = lab >= 0
+                m += on
+                keep = lab if on else keep
+            elif lab >= 0:
+                at[m], vox[m] = i, v
+                m += 1
+                keep = lab
         last[v] = keep
         per[v] = m
     # Counts from the running total.
@@ -127,6 +134,7 @@ def _label_runs(
     big = np.int64(1) << 62
     top = np.int64(-1)
     n_mixed = 0
+    n_lab = np.zeros(nv, np.int64)
     for v in range(nv):
         k, lo, hi = 0, big, np.int64(-1)
         for i in range(starts[v], starts[v] + counts[v]):
@@ -136,7 +144,7 @@ def _label_runs(
             lo = min(lo, lab if on else big)
             hi = max(hi, lab)
         pure[v] = k > 0 and k == counts[v] and lo == hi
-        first[v] = lo
+        first[v], n_lab[v] = lo, k
         top = max(top, hi)
         n_mixed += 0 if pure[v] else k
     present = np.zeros(top + 2, np.int64)  # a last slot for the unlabelled
@@ -148,6 +156,8 @@ def _label_runs(
     for v in range(nv):
         if pure[v]:
             present[first[v]] += counts[v]
+            continue
+        if n_lab[v] == 0:  # nothing labelled (most voxels of a map)
             continue
         prev = np.int64(-1)
         for i in range(starts[v], starts[v] + counts[v]):
