@@ -215,15 +215,16 @@ def cluster_convex(
     level = cell_levels(cp, comp, voxel, params)
     dense = level < len(CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
-    stats["_sparse_point"] = ~dense[comp]  # left whole: for layers.cut_layers
+    dense_point = dense[comp]  # gathered once
+    stats["_sparse_point"] = ~dense_point  # left whole: for layers.cut_layers
     if not dense.any():
         return comp  # its labels 0..C-1 are all used
-    out = np.where(dense[comp], -1, comp)
+    out = np.where(dense_point, -1, comp)
     _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
     above, band, sigma = _band(cp, support, surfaces, origin)
     window = _windows(comp, level, sigma, params)
-    free = dense[comp] & (above > band)
-    stats["band_points"] = int((dense[comp] & ~free).sum())
+    free = dense_point & (above > band)
+    stats["band_points"] = int((dense_point & ~free).sum())
     base = int(out.max()) + 1 if (out >= 0).any() else 0
     # One segmentation per cell size and normal window (a few: near and far objects).
     for k, w in sorted(
@@ -341,8 +342,9 @@ def _band(
         at = np.flatnonzero(support == sid)
         s = by_id[int(sid)]
         above[at] = pts[at, 2] - s.height
-        band[at] = s.band_width(r[at]) if s.band[1] > 0 else _FALLBACK_BAND
-        sigma[at] = np.hypot(s.noise[0], s.noise[1] * r[at] ** 2)
+        # The noise at range once: the band is that many sigmas (as Surface.band_width).
+        sigma[at] = noise = np.hypot(s.noise[0], s.noise[1] * r[at] ** 2)
+        band[at] = np.maximum(s.band[0] * noise, s.band[1]) if s.band[1] > 0 else _FALLBACK_BAND
     # The noise is the sensor's: over no surface (a table's edge, a wall's piece), the model
     # of the surface with most points holds at the point's range, as it does over it.
     measured = [s for s in surfaces if s.noise[0] > 0 or s.noise[1] > 0]
