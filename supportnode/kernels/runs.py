@@ -225,6 +225,27 @@ def newly_labelled(
     return _newly_labelled(labels, before, s, c, int(n))
 
 
+@njit(cache=True, nogil=True)
+def _scatter_lookup(out: np.ndarray, rows: np.ndarray, lut: np.ndarray, idx: np.ndarray) -> bool:
+    for i in range(rows.size):  # checked first: nothing written when a row is outside
+        if rows[i] < 0 or rows[i] >= out.size or idx[i] < -lut.size or idx[i] >= lut.size:
+            return False
+    for i in range(rows.size):
+        out[rows[i]] = lut[idx[i]]  # a negative index from the end, as numpy's
+    return True
+
+
+def scatter_lookup(out: np.ndarray, rows: np.ndarray, lut: np.ndarray, idx: np.ndarray) -> None:
+    """``out[rows] = lut[idx]`` in place, in one pass without the (K,) gathered temporary:
+    rows (K,) int positions into ``out`` (N,), idx (K,) int positions into ``lut`` (L,) (negative
+    ones from the end, as numpy's), ``out`` and ``lut`` of one dtype. Raises ValueError on
+    lengths, dtypes or positions outside (then nothing is written)."""
+    if len(rows) != len(idx) or out.dtype != lut.dtype or not out.flags.c_contiguous:
+        raise ValueError("scatter_lookup: rows and idx of one length, out contiguous like lut")
+    if not _scatter_lookup(out, rows, lut, idx):
+        raise ValueError("scatter_lookup: a position lies outside out or lut")
+
+
 def _columns(local: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
     if not (lx.ndim == ly.ndim == lz.ndim == 1 and len(lx) == len(ly) == len(lz)):
@@ -280,3 +301,4 @@ def _warm() -> None:
     label_runs(np.array([0, -1, 1], np.int32), np.array([0, 2]), np.array([2, 1]))
     lab = np.array([0, -1, 1], np.int32)
     newly_labelled(lab, lab.copy(), np.array([0, 2]), np.array([2, 1]), 2)
+    scatter_lookup(np.zeros(3, np.int32), np.arange(3), np.array([5, -1], np.int32), lab)

@@ -17,6 +17,7 @@ from supportnode.kernels.runs import (
     newly_labelled,
     range_extremes,
     run_moments,
+    scatter_lookup,
 )
 
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -192,3 +193,28 @@ def test_newly_labelled_refuses_ranges_outside():
     with pytest.raises(ValueError, match="outside"):
         newly_labelled(lab, lab, np.array([2]), np.array([2]), 1)
     assert newly_labelled(lab, lab, np.zeros(0, int), np.zeros(0, int), 2).tolist() == [0, 0]
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(0, 200), n_lut=st.integers(1, 6), seed=st.integers(0, 10_000))
+def test_scatter_lookup_is_numpys_scatter_of_a_gather(n, n_lut, seed):
+    rng = np.random.default_rng(seed)
+    lut = rng.integers(-1, 9, n_lut).astype(np.int32)
+    idx = rng.integers(-n_lut, n_lut, n).astype(np.int32)  # -1: the last entry, as numpy's
+    rows = rng.permutation(n + 5)[:n]
+    got = np.full(n + 5, -7, np.int32)
+    want = got.copy()
+    scatter_lookup(got, rows, lut, idx)
+    want[rows] = lut[idx]
+    np.testing.assert_array_equal(got, want)
+
+
+def test_scatter_lookup_refuses_positions_outside_and_writes_nothing():
+    out = np.zeros(3, np.int32)
+    with pytest.raises(ValueError, match="outside"):
+        scatter_lookup(out, np.array([0, 3]), np.array([5], np.int32), np.array([0, 0]))
+    with pytest.raises(ValueError, match="outside"):
+        scatter_lookup(out, np.array([0, 1]), np.array([5], np.int32), np.array([0, 1]))
+    assert out.tolist() == [0, 0, 0]
+    with pytest.raises(ValueError, match="one length"):
+        scatter_lookup(out, np.array([0]), np.array([5], np.int32), np.array([0, 1]))
