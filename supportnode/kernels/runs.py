@@ -2,7 +2,10 @@
 
 Surface summaries reduce the labelled points of each (voxel, surface) run: numpy gathered the
 points' three columns and six products into fresh arrays first, then ran a reduceat on each
-(the costliest step of a summary on millions of points). Here each run is one loop.
+(the costliest step of a summary on millions of points). Here each run is one loop. So are
+the steps around them over a grid's labels: the labelled points and their voxels
+(`labelled`), the runs of one label (`label_runs`), the points newly labelled in some voxels
+(`newly_labelled`) and the labels' scatter back to input order (`scatter_lookup`).
 """
 
 from __future__ import annotations
