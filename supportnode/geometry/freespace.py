@@ -253,14 +253,12 @@ def free_space_all(
     # grouping): one gather of the points on surfaces, not a sort and gather of all clusters.
     slot = {s.id: k for k, s in reversed(list(enumerate(surfs)))}  # first surface of an id
     of_cluster = np.array([slot.get(s, len(surfs)) for s in sids] + [len(surfs)], dtype=np.int32)
-    # Only the points of objects on a surface are sorted (labels -1 read the last entry):
-    # the same runs, in the same order, as a stable sort of all points' keys.
-    key = of_cluster[lab]
-    on = np.flatnonzero(key < len(surfs))
-    key = key[on]
-    by_key = _stable_argsort(key)
-    order = on[by_key]
-    bounds = np.searchsorted(key[by_key], np.arange(len(surfs) + 1))
+    # Only the points of objects on a surface, grouped by surface (labels -1 read the last
+    # entry): the same runs, in the same order, as a stable sort of all points' keys, by a
+    # counting sort (compiled) without the (N,) keys.
+    from supportnode.kernels.groups import rows_by_key  # numba only when used
+
+    order, bounds = rows_by_key(lab, of_cluster, len(surfs))
     out = []
     for s in surfs:  # one iteration per surface
         on_this = [i for i, sid in enumerate(sids) if sid == s.id]
@@ -270,14 +268,6 @@ def free_space_all(
         xy = np.take(pts, rows, axis=0).astype(np.float64, copy=False)[:, :2]
         out.append(_free_space(s, extents, [xy], None, params))
     return out
-
-
-def _stable_argsort(key: np.ndarray) -> np.ndarray:
-    """``np.argsort(key, kind="stable")`` of small non-negative ints (M,): a radix sort on
-    16 bits when they fit (the same permutation), 3x faster than numpy's int64 sort."""
-    if len(key) and key.max() < np.iinfo(np.uint16).max:
-        return np.argsort(key.astype(np.uint16), kind="stable")
-    return np.argsort(key, kind="stable")
 
 
 def _squared_edt(mask: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ the origin and can be merged scan after scan (the node's map does exactly that).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -164,6 +165,19 @@ class KeyIndex:
         return hit % len(keys), j[hit]
 
 
+class Labelled(NamedTuple):
+    """The labelled points (label >= 0) of grid-order labels (see `VoxelGrid.labelled`).
+
+    at: (K,) int64 their positions, ascending; vox: (K,) int64 the voxel of each; per: (M,)
+    int64 labelled points per voxel; last: (M,) int64 the label of each voxel's last
+    labelled point, -1 for none."""
+
+    at: np.ndarray
+    vox: np.ndarray
+    per: np.ndarray
+    last: np.ndarray
+
+
 @dataclass
 class VoxelGrid:
     """Points grouped into voxels, with per-voxel moments.
@@ -197,6 +211,13 @@ class VoxelGrid:
         if self._position_voxel is None:
             self._position_voxel = np.repeat(np.arange(len(self.counts)), self.counts)
         return self._position_voxel[positions]
+
+    def labelled(self, labels: np.ndarray) -> Labelled:
+        """The points of (N,) grid-order ``labels`` that are >= 0, in one compiled pass: what
+        ``flatnonzero(labels >= 0)``, ``voxel_at`` of it and per-voxel counts give."""
+        from supportnode.kernels.runs import labelled  # numba only when used
+
+        return Labelled(*labelled(labels, self.starts, self.counts))
 
     @property
     def corners(self) -> np.ndarray:

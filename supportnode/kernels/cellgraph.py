@@ -12,19 +12,13 @@ costs twenty.
 from __future__ import annotations
 
 import numpy as np
-from numba import int64, njit, uint64
+from numba import njit
 
 from supportnode.kernels.offsets import FORWARD_26
 from supportnode.kernels.runtime import warmer
-from supportnode.kernels.windows import add_rows, dense_columns
+from supportnode.kernels.windows import _find, _home, _window_sums
 
-GOLDEN = 0x9E3779B97F4A7C15
 MOMENTS = 10  # count, x, y, z, xx, yy, zz, xy, xz, yz
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _home(key: int, shift: int) -> int:
-    return int64((uint64(key) * uint64(GOLDEN)) >> uint64(shift))
 
 
 @njit(cache=True, nogil=True)
@@ -44,116 +38,6 @@ def _build(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         tk[pos] = keys[i]
         tv[pos] = i
     return tk, tv, shift
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _find(tk: np.ndarray, tv: np.ndarray, shift: int, key: int) -> int:
-    mask = tk.size - 1
-    pos = _home(key, shift)
-    while True:
-        k = tk[pos]
-        if k == key:
-            return tv[pos]
-        if k == -1:
-            return -1
-        pos = (pos + 1) & mask
-
-
-@njit(cache=True, nogil=True)
-def _columns(ijk: np.ndarray, dims: np.ndarray) -> tuple:
-    # The cells grouped by column (i, j): a lookup table of the columns' packed keys, each
-    # column's run [start[col], start[col + 1]) of ``cells``, ascending in k within the run.
-    n = ijk.shape[0]
-    keys = np.empty(n, np.int64)
-    for c in range(n):
-        keys[c] = ijk[c, 0] * dims[1] + ijk[c, 1]
-    bits = 4
-    while (1 << bits) < 2 * max(n, 1):
-        bits += 1
-    cap = 1 << bits
-    shift = 64 - bits
-    mask = cap - 1
-    tk = np.full(cap, -1, np.int64)
-    tv = np.empty(cap, np.int64)
-    col = np.empty(n, np.int64)
-    count = np.zeros(n + 1, np.int64)
-    m = 0
-    for c in range(n):  # a column id per column, in order of its first cell
-        pos = _home(keys[c], shift)
-        while tk[pos] != -1 and tk[pos] != keys[c]:
-            pos = (pos + 1) & mask
-        if tk[pos] == -1:
-            tk[pos] = keys[c]
-            tv[pos] = m
-            m += 1
-        col[c] = tv[pos]
-        count[col[c] + 1] += 1
-    start = np.empty(m + 1, np.int64)
-    start[0] = 0
-    for q in range(m):
-        start[q + 1] = start[q] + count[q + 1]
-    fill = start.copy()
-    cells = np.empty(n, np.int64)
-    for c in range(n):
-        t = fill[col[c]]
-        # Insertion into the column's run by k (columns are short: tens of cells).
-        while t > start[col[c]] and ijk[cells[t - 1], 2] > ijk[c, 2]:
-            cells[t] = cells[t - 1]
-            t -= 1
-        cells[t] = c
-        fill[col[c]] += 1
-    return tk, tv, shift, start, cells
-
-
-@njit(cache=True, nogil=True)
-def _window_sums(
-    ijk: np.ndarray,
-    dims: np.ndarray,
-    mom: np.ndarray,
-    w: int,
-    label: np.ndarray,
-    same: bool,
-    at: np.ndarray,
-) -> np.ndarray:
-    # Per cell, the (2w + 1)^2 columns around it, each looked up once and its cells within w
-    # in k read in ascending k: the same cells in the same order (dx, dy, dz ascending) as
-    # (2w + 1)^3 lookups of single cells, so the same sums to the bit. The columns come from
-    # a dense table where the cells' box allows one: a row of dy's columns then lies in one
-    # or two cache lines, where each hashed lookup was a chain of dependent reads.
-    tk, tv, shift, start, cells = _columns(ijk, dims)
-    dense, di, dj, width = dense_columns(ijk, start, cells, w)
-    out = np.zeros((at.size, mom.shape[1]))
-    idx = np.empty((2 * w + 1) ** 3, np.int64)  # the cells of one window, in order
-    for r in range(at.size):
-        c = at[r]
-        k_lo, k_hi = ijk[c, 2] - w, ijk[c, 2] + w
-        n = 0
-        for dx in range(-w, w + 1):
-            for dy in range(-w, w + 1):
-                if dense.size:
-                    q = dense[(ijk[c, 0] + dx - di) * width + ijk[c, 1] + dy - dj]
-                else:
-                    q = _find(tk, tv, shift, (ijk[c, 0] + dx) * dims[1] + ijk[c, 1] + dy)
-                if q < 0:
-                    continue
-                # From the column's first cell at k_lo or above, by bisection: a column
-                # holds several times the window's cells on an object's side.
-                lo, hi = start[q], start[q + 1]
-                while lo < hi:
-                    mid = (lo + hi) >> 1
-                    if ijk[cells[mid], 2] < k_lo:
-                        lo = mid + 1
-                    else:
-                        hi = mid
-                for t in range(lo, start[q + 1]):
-                    j = cells[t]
-                    if ijk[j, 2] > k_hi:
-                        break
-                    if not same or label[j] == label[c]:
-                        idx[n] = j
-                        n += 1
-        add_rows(mom, idx, n, out[r])
-    return out
 
 
 @njit(cache=True, nogil=True)

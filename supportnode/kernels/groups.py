@@ -14,7 +14,7 @@ from numba import njit
 
 from supportnode.kernels.runtime import warmer
 
-__all__ = ["group_rows", "label_boxes", "rows_at_ranks", "run_sums"]
+__all__ = ["group_rows", "label_boxes", "rows_at_ranks", "rows_by_key", "run_sums"]
 
 
 @njit(cache=True, nogil=True)
@@ -136,6 +136,43 @@ def group_rows(
 
 
 @njit(cache=True, nogil=True)
+def _rows_by_key(labels: np.ndarray, key_of: np.ndarray, n: int) -> tuple:
+    last = key_of.size - 1
+    start = np.zeros(n + 1, np.int64)
+    for i in range(labels.size):  # counts per key, shifted by one
+        k = key_of[labels[i] if labels[i] >= 0 else last]
+        if 0 <= k < n:
+            start[k + 1] += 1
+    for k in range(n):
+        start[k + 1] += start[k]
+    fill = np.empty(n, np.int64)
+    for k in range(n):
+        fill[k] = start[k]
+    rows = np.empty(start[n], np.int64)
+    for i in range(labels.size):  # each row straight to its place, in row order per key
+        k = key_of[labels[i] if labels[i] >= 0 else last]
+        if 0 <= k < n:
+            rows[fill[k]] = i
+            fill[k] += 1
+    return rows, start
+
+
+def rows_by_key(labels: np.ndarray, key_of: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``labels`` (M,) int grouped by the key of their label, ``key_of[label]``
+    (``key_of`` (L + 1,) int, its last entry the key of label -1), keys 0..n-1 only (others
+    left out): (rows (R,) int64 by key, in row order within a key; start (n + 1,) int64, each
+    key's run). The same as a stable argsort of the keys below n and its searchsorted
+    bounds, in two passes without the (M,) keys."""
+    lab = np.ascontiguousarray(labels)
+    key = np.ascontiguousarray(key_of, dtype=np.int64)
+    if lab.ndim != 1 or key.ndim != 1 or len(key) < 1:
+        raise ValueError("rows_by_key: labels (M,) and key_of (L + 1,)")
+    if len(lab) and (lab.max() >= len(key) - 1 or lab.min() < -1):
+        raise ValueError("rows_by_key: a label has no key")
+    return _rows_by_key(lab, key, int(n))
+
+
+@njit(cache=True, nogil=True)
 def _run_sums(points: np.ndarray, begin: np.ndarray, end: np.ndarray) -> np.ndarray:
     out = np.zeros((len(begin), points.shape[1]))
     for j in range(len(begin)):
@@ -169,3 +206,5 @@ def _warm() -> None:
     label_boxes(np.zeros((2, 3)), np.array([0, -1]), 1)
     group_rows(np.zeros((2, 3)), np.array([0, -1]), 1)
     run_sums(np.zeros((2, 3)), np.array([0]), np.array([2]))
+    for dtype in (np.int32, np.int64):  # segmentation labels are int32; others int64
+        rows_by_key(np.array([0, -1], dtype), np.array([0, 1]), 1)

@@ -663,3 +663,18 @@ def test_split_objects_finds_again_only_the_surfaces_of_split_clusters():
         )
         np.testing.assert_array_equal(seg.surface_ids, fresh.surface_ids)
         assert (seg.surface_ids >= 0).sum() >= 3
+
+
+def test_hull_volume_is_convex_hulls_to_the_bit():
+    """Qhull run as ConvexHull runs it (triangulated) gives its volume bit for bit; flat and
+    too small sets are degenerate (0)."""
+    from supportnode.geometry.objects import hull
+
+    rng = np.random.default_rng(11)
+    for n in (4, 5, 40, 3006):
+        for scale in (1e-3, 1.0, 50.0):
+            q = rng.normal(0, scale, (n, 3)) + rng.normal(0, 100, 3)
+            assert hull._hull_3d(q) == ConvexHull(q).volume
+    flat = np.c_[rng.uniform(0, 1, (50, 2)), np.zeros(50)]
+    assert hull._hull_3d(flat) == 0.0
+    assert hull._hull_3d(flat[:3]) == 0.0

@@ -7,7 +7,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from supportnode.kernels.band import band_rows, column_sums, points_in_columns
+from supportnode.kernels.band import (
+    band_rows,
+    column_sums,
+    label_voxel_counts,
+    points_in_columns,
+)
 
 
 def _grid(seed: int, voxels: int, per_voxel: int, surfaces: int):
@@ -92,3 +97,33 @@ def test_bad_input_is_refused():
         band_rows(
             np.zeros((2, 3)), np.zeros(3, np.int64), use, np.zeros(2), np.ones(2), np.zeros(2, bool)
         )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(0, 400),
+    n_comp=st.integers(1, 6),
+    n_vox=st.integers(1, 40),
+    dense=st.booleans(),
+    seed=st.integers(0, 10_000),
+)
+def test_label_voxel_counts_are_bincounts(n, n_comp, n_vox, dense, seed):
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(-1, n_comp, n).astype(np.int32)
+    at = np.flatnonzero(labels >= 0)
+    vox = np.sort(rng.integers(0, n_vox, len(at)))
+    count, w = label_voxel_counts(labels, at, vox, n_comp, n_vox, dense)
+    comp = labels[at].astype(np.int64)
+    np.testing.assert_array_equal(count, np.bincount(comp, minlength=n_comp))
+    if dense:
+        flat = comp * n_vox + vox
+        np.testing.assert_array_equal(w, np.bincount(flat, minlength=n_comp * n_vox))
+    else:
+        assert len(w) == 0
+
+
+def test_label_voxel_counts_refuse_a_label_past_n_comp():
+    labels = np.array([0, 3, 1], np.int32)
+    assert label_voxel_counts(labels, np.arange(3), np.zeros(3, int), 2, 1, True) is None
+    count, w = label_voxel_counts(labels[:1], np.arange(1), np.zeros(1, int), 1, 1, True)
+    assert count.tolist() == [1] and w.tolist() == [1]

@@ -182,3 +182,27 @@ def test_bin_points_refuses_nan_and_a_bad_size():
         bin_points(np.zeros((2, 3)), 0.0, 1)
     grid, of_point, mom, _ = bin_points(np.zeros((0, 3)), 0.01, 1)
     assert len(grid.ijk) == 0 and len(of_point) == 0 and mom.shape == (0, 10)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 60),
+    span=st.integers(1, 6),
+    w=st.integers(0, 2),
+    labelled=st.booleans(),
+    dup=st.booleans(),
+    seed=st.integers(0, 10_000),
+)
+def test_window_sums_of_some_cells_are_their_rows_to_the_bit(n, span, w, labelled, dup, seed):
+    # Cells asked for in any order (column by column inside), or some twice (cell by cell):
+    # each row exactly the row of all cells' sums.
+    ijk, dims = _cells(seed, n, span, 2)
+    rng = np.random.default_rng(seed + 2)
+    mom = rng.normal(size=(len(ijk), MOMENTS))
+    label = rng.integers(0, 3, len(ijk)) if labelled else None
+    g = CellGrid(ijk, dims, 2)
+    every = g.window_sums(mom, w, label)
+    at = rng.permutation(len(ijk))[: rng.integers(0, len(ijk) + 1)]
+    if dup and len(at):
+        at = np.r_[at, at[:1]]
+    np.testing.assert_array_equal(g.window_sums(mom, w, label, at), every[at])

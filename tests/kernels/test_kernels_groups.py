@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from supportnode.kernels.groups import group_rows, label_boxes, rows_at_ranks, run_sums
+from supportnode.kernels.groups import group_rows, label_boxes, rows_at_ranks, rows_by_key, run_sums
 
 
 @settings(max_examples=80, deadline=None)
@@ -104,3 +104,27 @@ def test_run_sums_are_cumsums_last_rows_to_the_bit(p, c, seed):
         np.testing.assert_array_equal(got[j], want)
     with pytest.raises(ValueError, match="within the rows"):
         run_sums(points, np.array([0]), np.array([p + 1]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    m=st.integers(0, 300), n_lab=st.integers(0, 8), n=st.integers(0, 5), seed=st.integers(0, 10_000)
+)
+def test_rows_by_key_as_a_stable_argsort_of_the_keys(m, n_lab, n, seed):
+    # free_space_all's grouping: each label's key (the last entry: label -1's), keys 0..n-1.
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(-1, n_lab, m).astype(np.int32)
+    key_of = rng.integers(0, n + 2, n_lab + 1).astype(np.int32)
+    rows, start = rows_by_key(labels, key_of, n)
+    key = key_of[labels]
+    on = np.flatnonzero(key < n)
+    by_key = np.argsort(key[on], kind="stable")
+    np.testing.assert_array_equal(rows, on[by_key])
+    np.testing.assert_array_equal(start, np.searchsorted(key[on][by_key], np.arange(n + 1)))
+
+
+def test_rows_by_key_refuses_labels_without_a_key():
+    with pytest.raises(ValueError, match="no key"):
+        rows_by_key(np.array([0, 3]), np.array([0, 0]), 1)
+    rows, start = rows_by_key(np.zeros(0, np.int64), np.array([0]), 2)
+    assert len(rows) == 0 and start.tolist() == [0, 0, 0]

@@ -266,7 +266,7 @@ def _claim_feet(
     lab[loose] = np.where(owner[len(on) :] >= 0, owner[len(on) :], lab[loose])
     rows = on[took]
     cand = np.concatenate([cand, rows])
-    cp = np.concatenate([cp, pts[rows]])
+    cp = np.concatenate([cp, np.take(pts, rows, axis=0)])
     lab = np.concatenate([lab, owner[: len(on)][took]])
     return cand, cp, lab, rows
 

@@ -10,16 +10,19 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from supportnode.kernels.lines import column_ends
 from supportnode.kernels.rects import min_area_boxes
+
+try:  # scipy's wrapper of Qhull, under ConvexHull since scipy 0.12 (private: kept optional)
+    from scipy.spatial._qhull import _Qhull
+except ImportError:  # pragma: no cover - a scipy that moved it: ConvexHull itself
+    _Qhull = None
 
 # Clusters of more points than this take their 3-D hull from the ends of their vertical lines
 # (see _column_ends) and, if still more, from an even sample of those (see _hull_candidates).
-# Qhull takes fewer whole: a depth camera's points make no vertical lines, and grouping them
-# costs as much as the hull (the mOSD scans' clusters: 1.4 ms a scan for nothing dropped).
+# Qhull takes fewer whole: a depth camera's points make no vertical lines (the mOSD scans'
+# clusters: nothing dropped), and Qhull on 3000 of them costs ~0.4 ms.
 _HULL_MAX_POINTS = 3000
-# Odd 64-bit multipliers (golden ratio and a splitmix64 constant) hashing x, y bit patterns.
-_HASH_X = np.uint64(0x9E3779B97F4A7C15)
-_HASH_Y = np.uint64(0xBF58476D1CE4E5B9)
 
 
 def _volume(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -48,7 +51,16 @@ def _hull_candidates(p: np.ndarray) -> np.ndarray:
 def _hull_3d(q: np.ndarray) -> float:
     """Volume (m^3) of the convex hull of q (Q, 3); 0 when Qhull finds it degenerate."""
     try:
-        return float(ConvexHull(q).volume)
+        if _Qhull is None:
+            return float(ConvexHull(q).volume)
+        # ConvexHull's own run of Qhull ("Qt", triangulated, then the volume), without the
+        # simplex, neighbour and equation arrays it builds next: 20 % of its time here.
+        qh = _Qhull(b"i", np.ascontiguousarray(q, dtype=np.double), b"", required_options=b"Qt")
+        try:
+            qh.triangulate()
+            return float(qh.volume_area()[0])
+        finally:
+            qh.close()
     except (QhullError, ValueError):
         return 0.0
 
@@ -129,27 +141,7 @@ def _column_ends(p: np.ndarray) -> np.ndarray:
     joining them and is never a vertex of the convex hull, so dropping it changes neither the
     hull nor its volume (up to round-off in the facet sums). Scanners put many points on one
     vertical line (the beams of one azimuth on a wall: 80k points on 2.7k lines in the
-    simulator's kitchen); for others nothing is dropped. The points are grouped by a 32-bit
-    hash of their x, y bits with two 16-bit radix passes (a comparison sort of 80k keys takes
-    10x longer); a hash collision only splits a line's points into runs and keeps more.
-    """
-    bits = np.ascontiguousarray(p).view(np.uint64)  # (P, 3): x, y columns read in place
-    x, y = bits[:, 0], bits[:, 1]
-    h = (((x * _HASH_X) ^ (y * _HASH_Y)) >> np.uint64(32)).astype(np.uint32)
-    order = np.argsort(h.astype(np.uint16), kind="stable")  # low 16 bits, then high 16
-    order = order[np.argsort((h >> np.uint32(16)).astype(np.uint16)[order], kind="stable")]
-    xs, ys = np.take(x, order), np.take(y, order)
-    new_line = np.empty(len(p), dtype=bool)
-    new_line[0] = True
-    np.not_equal(xs[1:], xs[:-1], out=new_line[1:])
-    new_line[1:] |= ys[1:] != ys[:-1]
-    first = np.flatnonzero(new_line)
-    run = np.diff(first, append=len(p))
-    z = np.take(p[:, 2], order)
-    # Each line's extremes repeated over its run: cheaper than a cumsum of line ids and gathers.
-    inner = (z > np.repeat(np.minimum.reduceat(z, first), run)) & (
-        z < np.repeat(np.maximum.reduceat(z, first), run)
-    )
-    keep = np.empty(len(p), dtype=bool)
-    keep[order] = ~inner
-    return keep
+    simulator's kitchen); for others nothing is dropped. Compiled (`kernels.lines`): the
+    points grouped by a 32-bit hash of their x, y bits (a hash collision only splits a line's
+    points into runs and keeps more)."""
+    return column_ends(p)

@@ -23,7 +23,7 @@ from supportnode.geometry.surfaces.planar import (
     _plane_in,
     _Planes,
 )
-from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, VoxelGrid
+from supportnode.geometry.voxels import OUTER_INDEX, KeyIndex, Labelled, VoxelGrid
 from supportnode.kernels.components import label_edges
 from supportnode.params import SurfaceParams
 
@@ -82,10 +82,12 @@ def label_in_band(
     if sensor_origin is not None:
         centre = (grid.keys + 0.5) * grid.size
         r_voxel = distances(centre, sensor_origin)
-    model = fit_sample(grid, labels, best, r_voxel, len(tolerance))
+    # The labelled points found once for the steps that read these labels.
+    lab = grid.labelled(labels)
+    model = fit_sample(grid, labels, best, r_voxel, len(tolerance), lab)
     none = np.zeros(len(tolerance), dtype=bool)
     band = Band(model, params.band_sigmas, params.band_min, r_voxel, none, tolerance)
-    by_band = band_decides(grid, labels, surface_of_voxel, band, params.clutter_normal_k)
+    by_band = band_decides(grid, labels, surface_of_voxel, band, params.clutter_normal_k, lab)
     if not by_band.any():
         return labels, best, band
     # The noise is measured about the windows' planes (a surface straddling two layers of
@@ -95,14 +97,14 @@ def label_in_band(
     # lifts it): elsewhere a voxel's own plane follows the surface, and a far depth camera's
     # steps, best.
     window = _Planes(planes.mean.copy(), planes.normal.copy(), planes.roughness)
-    refit_planes(grid, index, surface_of_voxel, window, labels, by_band)
+    refit_planes(grid, index, surface_of_voxel, window, labels, by_band, lab)
     trial, best = _label_points_planar(grid, index, surface_of_voxel, window, tolerance)
-    model = fit_sample(grid, trial, best, r_voxel, len(tolerance))
+    model = fit_sample(grid, trial, best, r_voxel, len(tolerance), grid.labelled(trial))
     sv = np.flatnonzero(surface_of_voxel >= 0)
     sv = sv[by_band[surface_of_voxel[sv]]]
     r = 0.0 if r_voxel is None else r_voxel[sv]
     off = _miss(grid, planes, window, sv) > _OFF_SIGMAS * model.sigma(surface_of_voxel[sv], r)
-    take = np.union1d(_cluttered(grid, index, surface_of_voxel, labels), sv[off])
+    take = np.union1d(_cluttered(grid, index, surface_of_voxel, lab), sv[off])
     planes.mean[take] = window.mean[take]
     planes.normal[take] = window.normal[take]
     band = Band(model, params.band_sigmas, params.band_min, r_voxel, by_band, tolerance)
@@ -144,8 +146,11 @@ def label_ring(
     if len(vsel):
         surf = surface_of_voxel[t]
         _label_by_plane_of(grid, planes, t, vsel, surf, band.width(surf, vsel), labels, best, True)
-    new = labels[(labels >= 0) & (before < 0)]
-    return np.bincount(new, minlength=len(kept))
+    # Only the voxels labelled in can hold new labels: counted there (compiled), not over all.
+    from supportnode.kernels.runs import newly_labelled
+
+    touched = np.unique(vsel)
+    return newly_labelled(labels, before, grid.starts[touched], grid.counts[touched], len(kept))
 
 
 # A voxel's own plane leaving its window's by more than this many noise sigmas is not the
@@ -171,11 +176,12 @@ _CLUTTER_SHARE = 0.05
 
 
 def _cluttered(
-    grid: VoxelGrid, index: KeyIndex, surface_of_voxel: np.ndarray, labels: np.ndarray
+    grid: VoxelGrid, index: KeyIndex, surface_of_voxel: np.ndarray, lab: Labelled
 ) -> np.ndarray:
-    """The surface voxels (indices) holding clutter, in them or just above them."""
+    """The surface voxels (indices) holding clutter, in them or just above them. lab: the
+    grid's labelled points (`VoxelGrid.labelled`)."""
     sv = np.flatnonzero(surface_of_voxel >= 0)
-    off = np.add.reduceat((labels < 0).astype(np.int64), grid.starts) if len(labels) else None
+    off = grid.counts - lab.per if len(grid.order) else None  # unlabelled points per voxel
     if off is None or len(sv) == 0:
         return np.zeros(0, np.int64)
     (up,) = index.neighbours_many(sv, [(0, 0, 1)], grid.keys)
@@ -195,18 +201,20 @@ def refit_planes(
     planes: _Planes,
     labels: np.ndarray,
     which: np.ndarray,
+    lab: Labelled | None = None,
 ) -> None:
     """Refit, in place, each surface voxel's plane to the labelled points of its surface in
     the voxels around it (3 x 3 columns): a voxel holding an object's foot fits a plane
     tilted toward it, which a narrow band then misses on the table side; its neighbours'
     inliers outvote the foot. labels: (N,) surface component per point in the grid's voxel
-    order, -1 for none; which: (C,) bool, the components refitted."""
+    order, -1 for none; which: (C,) bool, the components refitted; lab: its labelled points
+    (`VoxelGrid.labelled`) when known."""
     sv = np.flatnonzero(surface_of_voxel >= 0)
     sv = sv[which[surface_of_voxel[sv]]]
-    at = np.flatnonzero(labels >= 0)
-    if len(sv) == 0 or len(at) == 0:
+    lab = grid.labelled(labels) if lab is None else lab
+    if len(sv) == 0 or len(lab.at) == 0:
         return
-    count, s1, s2, lab_of_voxel = _labelled_moments(grid, labels, at)
+    count, s1, s2, lab_of_voxel = _labelled_moments(grid, lab)
     own = surface_of_voxel[sv]
     j = index.neighbours_many(sv, _WINDOW, grid.keys)  # (window, sv)
     ok = j >= 0
@@ -236,21 +244,20 @@ def refit_planes(
 
 
 def _labelled_moments(
-    grid: VoxelGrid, labels: np.ndarray, at: np.ndarray
+    grid: VoxelGrid, lab: Labelled
 ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
     """Per voxel (V,): the count, the sums (3 columns) and the sums of products (6, in
-    ``OUTER_INDEX`` order) of its labelled points ``at`` (grid order) about the grid's
-    origin, metres; and the surface label of its labelled points (-1: none)."""
+    ``OUTER_INDEX`` order) of its labelled points ``lab`` (`VoxelGrid.labelled`) about the
+    grid's origin, metres; and the surface label of its labelled points (-1: none)."""
     from supportnode.kernels.runs import run_moments
 
     n_vox = len(grid.counts)
     # One compiled pass over runs of the grid's columns, about each voxel's corner, then
-    # shifted to the grid's origin.
-    vox = grid.voxel_at(at)
-    run = np.flatnonzero(np.r_[True, vox[1:] != vox[:-1]])
-    v = vox[run]
-    loc1, loc2, _, _ = run_moments(grid.local, at, run)
-    n = np.diff(np.r_[run, len(at)]).astype(np.float64)
+    # shifted to the grid's origin. A voxel's labelled points come in one run.
+    v = np.flatnonzero(lab.per)
+    run = (np.cumsum(lab.per) - lab.per)[v]
+    loc1, loc2, _, _ = run_moments(grid.local, lab.at, run)
+    n = lab.per[v].astype(np.float64)
     corner = grid.keys[v] * grid.size
     count = np.zeros(n_vox)
     count[v] = n
@@ -265,12 +272,9 @@ def _labelled_moments(
             + corner[:, b] * loc1[:, a]
             + n * corner[:, a] * corner[:, b]
         )
-    lab_of_voxel = np.full(n_vox, -1, np.int64)
     # Each voxel's last labelled point's label (as assigning all of them, the last winning,
-    # did: ten times the time): the points of a voxel come in one run.
-    last = np.r_[run[1:], len(at)] - 1
-    lab_of_voxel[v] = labels[at[last]]
-    return count, s1, s2, lab_of_voxel
+    # did: ten times the time).
+    return count, s1, s2, lab.last
 
 
 def drop_raised(
@@ -334,18 +338,34 @@ _VET_MIN_SIGMAS = 8.0
 
 
 def band_decides(
-    grid: VoxelGrid, labels: np.ndarray, surface_of_voxel: np.ndarray, band: Band, k: int
+    grid: VoxelGrid,
+    labels: np.ndarray,
+    surface_of_voxel: np.ndarray,
+    band: Band,
+    k: int,
+    lab: Labelled | None = None,
 ) -> np.ndarray:
     """(C,) bool per surface component: the noise band, not k-NN normals, decides which of
     its points are on it (a depth camera's surfaces). There the points' k-NN normals say
     nothing about tilt (their neighbourhood, ~ spacing sqrt(k / pi) wide, is under
     ``_VET_MIN_SIGMAS`` sigma), while the band is thin against an object (at most a quarter
     of a voxel's height): the objects' feet are told apart by where the objects stand. On a
-    cloud noisy beyond that (a slab as thick as the objects are tall), neither tells."""
+    cloud noisy beyond that (a slab as thick as the objects are tall), neither tells.
+    lab: the labelled points of ``labels`` (`VoxelGrid.labelled`) when known."""
+    from supportnode.kernels.band import label_voxel_counts  # a depth camera's kernels
+
     n_comp = len(band.model.a)
-    at = np.flatnonzero(labels >= 0)
-    comp = labels[at].astype(np.int64)
-    count = np.bincount(comp, minlength=n_comp).astype(np.float64)
+    lab = grid.labelled(labels) if lab is None else lab
+    at, n_vox = lab.at, len(grid.counts)
+    # The same sorted keys and counts as np.unique, without its sort, when dense enough.
+    dense = band.r_voxel is not None and n_comp * n_vox <= 4 * len(at) + (1 << 16)
+    counted = label_voxel_counts(labels, at, lab.vox, n_comp, n_vox, dense)
+    comp = None
+    if counted is None:  # a label past n_comp: numpy's counts, however long
+        comp = labels[at].astype(np.int64)
+        count = np.bincount(comp, minlength=n_comp).astype(np.float64)
+    else:
+        count = counted[0].astype(np.float64)
     sv = np.flatnonzero(surface_of_voxel >= 0)
     cols = np.unique(
         np.stack([surface_of_voxel[sv], grid.keys[sv, 0], grid.keys[sv, 1]], 1), axis=0
@@ -355,16 +375,20 @@ def band_decides(
     # Each component's median range, from its voxels weighted by their labelled points.
     r_med = np.zeros(n_comp)
     if band.r_voxel is not None:
-        vox = grid.voxel_at(at)
-        flat = comp * len(grid.counts) + vox
-        if n_comp * len(grid.counts) <= 4 * len(flat) + (1 << 16):
-            # The same sorted keys and counts as np.unique, without its sort.
-            w = np.bincount(flat, minlength=n_comp * len(grid.counts))
+        if dense and counted is not None:
+            w = counted[1]
             key = np.flatnonzero(w)
             w = w[key]
         else:
-            key, w = np.unique(flat, return_counts=True)
-        c, r = key // len(grid.counts), band.r_voxel[key % len(grid.counts)]
+            comp = labels[at].astype(np.int64) if comp is None else comp
+            flat = comp * n_vox + lab.vox
+            if n_comp * n_vox <= 4 * len(flat) + (1 << 16):
+                w = np.bincount(flat, minlength=n_comp * n_vox)
+                key = np.flatnonzero(w)
+                w = w[key]
+            else:
+                key, w = np.unique(flat, return_counts=True)
+        c, r = key // n_vox, band.r_voxel[key % n_vox]
         order = np.lexsort((r, c))
         cw = np.cumsum(w[order])
         first = np.searchsorted(c[order], np.arange(n_comp))

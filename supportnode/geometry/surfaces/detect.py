@@ -75,9 +75,11 @@ def detect_surfaces(
     outlines = cells_outlines([s.cells for s in surfaces], cell_size)
     for s, outline in zip(surfaces, outlines, strict=True):
         s.outline = outline
+    from supportnode.kernels.runs import scatter_lookup  # numba only when used
+
     labels = np.full(len(pts), -1, dtype=np.int32)
     rows = grid.order if keep is None else np.flatnonzero(keep)[grid.order]
-    labels[rows] = lut[sorted_labels]
+    scatter_lookup(labels, rows, lut.astype(np.int32, copy=False), sorted_labels)
     raised = np.zeros(0, np.int64) if planar is None else np.sort(rows[planar.raised])
     stats.update(points=len(pts), voxels=len(grid.counts), surfaces=len(surfaces))
     if keep is not None:

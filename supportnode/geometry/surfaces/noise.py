@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from supportnode.geometry.voxels import VoxelGrid
+from supportnode.geometry.voxels import Labelled, VoxelGrid
 
 # Range bins for the fit, metres wide; a bin needs this many points to count.
 _BIN = 0.2
@@ -86,12 +86,18 @@ def _fit_bins(var: np.ndarray, r4: np.ndarray, w: np.ndarray, ranged: bool) -> t
 
 
 def fit_sample(
-    grid: VoxelGrid, labels: np.ndarray, best: np.ndarray, r_voxel: np.ndarray | None, n: int
+    grid: VoxelGrid,
+    labels: np.ndarray,
+    best: np.ndarray,
+    r_voxel: np.ndarray | None,
+    n: int,
+    lab: Labelled | None = None,
 ) -> NoiseModel:
-    """:func:`fit_noise` of the labelled points (``best``: their heights above the planes)."""
-    on = np.flatnonzero(labels >= 0)
+    """:func:`fit_noise` of the labelled points (``best``: their heights above the planes;
+    lab: the labelled points, `VoxelGrid.labelled`, when known)."""
+    lab = grid.labelled(labels) if lab is None else lab
     # Medians need no more than an even sample (a scan's table holds ~10^5 points).
-    on = on[:: max(1, len(on) // _FIT_SAMPLES)]
-    voxel = grid.voxel_at(on)
+    step = max(1, len(lab.at) // _FIT_SAMPLES)
+    on, voxel = lab.at[::step], lab.vox[::step]
     r = None if r_voxel is None else r_voxel[voxel]
     return fit_noise(labels[on].astype(np.int64), np.abs(best[on]), r, n)

@@ -56,16 +56,18 @@ def _summarise(
     returns the surfaces and each component's surface id: ``lut[sorted_labels]`` (int32,
     its last entry -1 for the points on none). widths: footprint widths already
     measured, by ``_cells_key`` of the footprint (see :func:`_filter_components`)."""
-    at = np.flatnonzero(sorted_labels >= 0)
-    if len(at) == 0:
+    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    from supportnode.kernels.runs import label_runs
+
+    # One compiled pass: which voxels are pure, the points per component, the mixed runs.
+    pure, present, *mixed = label_runs(sorted_labels, grid.starts, grid.counts)
+    if len(present) == 0:
         return [], np.full(1, -1, dtype=np.int32)
-    lab = sorted_labels[at]
-    present = np.bincount(lab)
     comps = np.flatnonzero(present)
     s_count = len(comps)
     remap = np.full(len(present) + 1, -1, dtype=np.int64)  # last entry maps -1 to -1
     remap[comps] = np.arange(s_count)
-    runs = _runs(grid, sorted_labels, at, lab, remap)
+    runs = _runs(grid, sorted_labels, np.flatnonzero(pure), mixed, remap)
     mom = _moments(runs, s_count)
     counts = mom.counts.astype(np.int64)
     vcount = np.bincount(remap[surface_of_voxel[surface_of_voxel >= 0]], minlength=s_count)
@@ -116,44 +118,30 @@ def _widths(
 def _runs(
     grid: VoxelGrid,
     sorted_labels: np.ndarray,
-    at: np.ndarray,
-    lab: np.ndarray,
+    pure_vox: np.ndarray,
+    mixed: list[np.ndarray],
     remap: np.ndarray,
 ) -> _Runs:
-    """The runs of one (voxel, surface) of the labelled points ``at`` (labels ``lab``).
+    """The runs of one (voxel, surface) of the labelled points.
 
-    Most surface voxels hold points of one surface only: their run is the whole voxel, whose
-    moments the grid already has. Only mixed voxels are reduced point by point. Only the
-    labelled points are read (a few of all): a voxel is pure when all its points are labelled,
-    with one surface. Pure voxels' runs come first, then the mixed runs."""
-    # Imported here: importing the geometry (as the wire's types do) must not load numba.
+    Most surface voxels hold points of one surface only (``pure_vox``: all their points
+    labelled, with one surface): their run is the whole voxel, whose moments the grid already
+    has. Only mixed voxels are reduced point by point: ``mixed`` as `kernels.runs.label_runs`
+    gives them (their labelled points' positions, runs into those, the runs' labels and
+    voxels). Pure voxels' runs come first, then the mixed runs."""
     from supportnode.kernels.runs import range_extremes, run_moments
 
-    at_vox = grid.voxel_at(at)
-    first = np.flatnonzero(np.r_[True, at_vox[1:] != at_vox[:-1]])
-    vv = at_vox[first]
-    n_on = np.diff(np.append(first, len(at)))
-    pure = (n_on == grid.counts[vv]) & (
-        np.minimum.reduceat(lab, first) == np.maximum.reduceat(lab, first)
-    )
-    pure_vox = vv[pure]
-    mixed = np.repeat(~pure, n_on)
-    g = remap[lab[mixed]]
-    vox = at_vox[mixed]
-    cut = np.empty(len(g), dtype=bool)
-    cut[:1] = True
-    cut[1:] = (vox[1:] != vox[:-1]) | (g[1:] != g[:-1])
-    run = np.flatnonzero(cut)
+    idx, run, run_lab, run_vox = mixed
     # The mixed runs' moments and extremes read in place (compiled: no gathered columns).
-    m_sum, m_outer, m_min, m_max = run_moments(grid.local, at[mixed], run)
-    run_vox = np.concatenate([pure_vox, vox[run]])
-    corner = grid.keys[run_vox] * grid.size
+    m_sum, m_outer, m_min, m_max = run_moments(grid.local, idx, run)
+    vox = np.concatenate([pure_vox, run_vox])
+    corner = grid.keys[vox] * grid.size
     # Extremes of the pure voxels from their own points (all of the voxel's).
     v_min, v_max = range_extremes(grid.local, grid.starts[pure_vox], grid.counts[pure_vox])
     return _Runs(
-        g=np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], g[run]]),
-        vox=run_vox,
-        n=np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(g)))]),
+        g=np.concatenate([remap[sorted_labels[grid.starts[pure_vox]]], remap[run_lab]]),
+        vox=vox,
+        n=np.concatenate([grid.counts[pure_vox], np.diff(np.append(run, len(idx)))]),
         corner=corner,
         sum=np.concatenate([grid.sums[pure_vox], m_sum]),
         outer=np.concatenate([grid.outer[pure_vox], m_outer]),
