@@ -108,6 +108,21 @@ def _labelled(
     return at[:total], vox[:total], per, last
 
 
+def _tiling(
+    labels: np.ndarray, starts: np.ndarray, counts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """labels (N,), starts and counts (V,) int64, contiguous; ValueError unless the ranges
+    ``starts[v] : starts[v] + counts[v]`` tile 0 .. N - 1 in order."""
+    lab = np.ascontiguousarray(labels).ravel()
+    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
+    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
+    if len(s) != len(c):
+        raise ValueError("starts and counts differ in length")
+    if int(c.sum()) != len(lab) or (len(s) and (s[0] != 0 or (s[1:] != (s + c)[:-1]).any())):
+        raise ValueError("the ranges must tile the labels in order")
+    return lab, s, c
+
+
 def labelled(
     labels: np.ndarray, starts: np.ndarray, counts: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -116,14 +131,7 @@ def labelled(
     grid's): their positions (K,) ascending, each one's range (K,), and per range (V,) how
     many and the last one's label (-1: none), all int64. Raises ValueError on shapes or
     ranges that do not tile the labels."""
-    lab = np.ascontiguousarray(labels).ravel()
-    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
-    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
-    if len(s) != len(c):
-        raise ValueError("starts and counts differ in length")
-    if int(c.sum()) != len(lab) or (len(s) and (s[0] != 0 or (s[1:] != (s + c)[:-1]).any())):
-        raise ValueError("the ranges must tile the labels in order")
-    return _labelled(lab, s, c)
+    return _labelled(*_tiling(labels, starts, counts))
 
 
 @njit(cache=True, nogil=True)
@@ -185,14 +193,7 @@ def label_runs(
     >= 0); and of the other ranges with labelled points, those points' positions (K,) in
     order, runs of one label in one range as starts into them (R,), and each run's label
     (R,) and range (R,)."""
-    lab = np.ascontiguousarray(labels).ravel()
-    s = np.ascontiguousarray(starts, dtype=np.int64).ravel()
-    c = np.ascontiguousarray(counts, dtype=np.int64).ravel()
-    if len(s) != len(c):
-        raise ValueError("starts and counts differ in length")
-    if int(c.sum()) != len(lab) or (len(s) and (s[0] != 0 or (s[1:] != (s + c)[:-1]).any())):
-        raise ValueError("the ranges must tile the labels in order")
-    return _label_runs(lab, s, c)
+    return _label_runs(*_tiling(labels, starts, counts))
 
 
 @njit(cache=True, nogil=True)

@@ -396,6 +396,5 @@ def _inner_footprint(
     f = np.floor((xy - origin) / cell).astype(np.int64)
     img = np.zeros((int(f[:, 1].max()) + 3, int(f[:, 0].max()) + 3), dtype=bool)
     img[f[:, 1], f[:, 0]] = True
-    img = fill_holes(binary_closing(img))
-    img = binary_erosion(binary_opening(img))
+    img = binary_erosion(binary_opening(fill_holes(binary_closing(img))))
     return (img if img.any() else None), (origin, cell)
