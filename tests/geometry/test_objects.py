@@ -236,12 +236,22 @@ def test_single_objects_not_split(table_scene):
     assert res.stats["merged_splits"] == 0
     # A lone cylinder and an L-shaped box pair (a wide junction, not a neck) stay whole.
     floor = make_surface(0, 0.0, -1, 1, -1, 1)
-    ell = np.concatenate(
-        [box((0.0, 0.0, 0.0), (0.4, 0.15, 0.2)), box((0.0, 0.0, 0.0), (0.15, 0.4, 0.2))]
-    )
-    for obj in (cylinder(0, 0, 0.1, 0, 0.3), ell):
+    for obj in (cylinder(0, 0, 0.1, 0, 0.3), ell_box()):
         r = detect_objects(obj, SurfaceResult([floor], np.full(len(obj), -1, np.int32)))
         assert len(r.clusters) == 1 and r.stats["merged_splits"] == 0
+
+
+def ell_box(size=(0.4, 0.15, 0.2), step: float = 0.01) -> np.ndarray:
+    """(P, 3) the visible faces of an L-shaped box: two boxes of size (long, short, height) m
+    along x and along y from the origin, without the faces each hides inside the other (no
+    sensor sees them; they would meet the outer walls in concave creases)."""
+    long, short, height = size
+    parts = [((0.0, 0.0, 0.0), (long, short, height)), ((0.0, 0.0, 0.0), (short, long, height))]
+    pts = np.concatenate([box(lo, hi, step) for lo, hi in parts])
+    hidden = np.zeros(len(pts), dtype=bool)
+    for lo, hi in parts:  # strictly inside (by a millimetre) either box
+        hidden |= ((pts > np.add(lo, 1e-3)) & (pts < np.subtract(hi, 1e-3))).all(axis=1)
+    return pts[~hidden]
 
 
 def test_stack_of_boxes_is_one_object():
@@ -552,29 +562,27 @@ def barrel_triangle(r: float = 0.06, step: float = 0.005) -> np.ndarray:
 
 def test_barrels_touching_in_a_triangle_split_at_concave_creases():
     floor = make_surface(0, 0.0, -1, 1, -1, 1)
-    # Off by default: it needs dense sampling (here 8 mm; at 1 cm it finds no parts).
-    pts = barrel_triangle(step=0.008)
-    surf = SurfaceResult([floor], np.full(len(pts), -1, np.int32))
-    # The small gap in the middle fills on the footprint raster: no neck to cut.
-    off = detect_objects(pts, surf)
-    assert len(off.clusters) == 1
-    res = detect_objects(pts, surf, ObjectParams(split_concave=True))
-    assert res.stats["concave_splits"] == 1 and len(res.clusters) == 3
-    n = len(pts) // 3
-    truth = np.repeat(np.arange(3), n)
-    for k in range(3):  # each barrel is (mostly) one cluster of its own
-        assert np.bincount(res.labels[truth == k]).max() > 0.85 * n
-    assert len({int(np.bincount(res.labels[truth == k]).argmax()) for k in range(3)}) == 3
+    # The small gap in the middle fills on the footprint raster: no neck to cut. By default
+    # the walls part them (their tops join: see split_concave._split_walls); split_concave
+    # cuts the creases first, which needs denser sampling (8 mm; at 1 cm it finds no parts).
+    for step, params, key in (
+        (0.01, ObjectParams(), "wall_splits"),
+        (0.008, ObjectParams(split_concave=True), "concave_splits"),
+    ):
+        pts = barrel_triangle(step=step)
+        surf = SurfaceResult([floor], np.full(len(pts), -1, np.int32))
+        res = detect_objects(pts, surf, params)
+        assert res.stats[key] == 1 and len(res.clusters) == 3
+        n = len(pts) // 3
+        truth = np.repeat(np.arange(3), n)
+        for k in range(3):  # each barrel is (mostly) one cluster of its own
+            assert np.bincount(res.labels[truth == k]).max() > 0.85 * n
+        assert len({int(np.bincount(res.labels[truth == k]).argmax()) for k in range(3)}) == 3
 
 
 def test_single_concave_objects_not_split_at_creases():
     floor = make_surface(0, 0.0, -1, 1, -1, 1)
-    ell = np.concatenate(
-        [
-            box((0.0, 0.0, 0.0), (0.3, 0.1, 0.15), 0.005),
-            box((0.0, 0.0, 0.0), (0.1, 0.3, 0.15), 0.005),
-        ]
-    )
+    ell = ell_box((0.3, 0.1, 0.15), 0.005)
     # A bowl: a hemispherical shell (inside and outside) with its rim up.
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 120), np.linspace(0.05, np.pi / 2, 40))
     shell = [
@@ -586,6 +594,7 @@ def test_single_concave_objects_not_split_at_creases():
     for obj, params in ((ell, ObjectParams()), (bowl, ObjectParams()), (bowl, on)):
         r = detect_objects(obj, SurfaceResult([floor], np.full(len(obj), -1, np.int32)), params)
         assert len(r.clusters) == 1 and r.stats["concave_splits"] == 0
+        assert r.stats["wall_splits"] == 0
 
 
 def test_walls_around_two_rooms_are_not_cut_at_the_doorway(rng):

@@ -285,6 +285,7 @@ def split_objects(
     stats["split_parts"] = 0
     stats["step_splits"] = 0  # of which cut at a step of the top height
     stats["concave_splits"] = 0  # of which cut along concave creases
+    stats["wall_splits"] = 0  # of which cut where their walls part (sparse clusters)
     stats["layer_splits"] = 0  # sparse clusters cut where one stands on another's top
     known = components._supports
     split = lab
@@ -298,7 +299,9 @@ def split_objects(
         if len(near):  # footprints without them (see level)
             level = np.zeros(len(cp), bool)
             level[m:] = True
-        split = _split_touching(cp, split, params, stats, memo, components._origin, groups, level)
+        split = _split_touching(
+            cp, split, params, stats, memo, components._origin, groups, level, components._sparse
+        )
     t2 = time.perf_counter()
     if stats["merged_splits"] == 0 and stats["layer_splits"] == 0:
         # Nothing split (the usual case): the clusters are the components, in their order.

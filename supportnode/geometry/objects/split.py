@@ -21,7 +21,11 @@ from scipy.spatial import cKDTree
 from supportnode.geometry.memo import Memo
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.layers import Groups
-from supportnode.geometry.objects.split_concave import _CONCAVE_MAX_EXTENT, _split_concave
+from supportnode.geometry.objects.split_concave import (
+    _CONCAVE_MAX_EXTENT,
+    _split_concave,
+    _split_walls,
+)
 from supportnode.geometry.objects.split_footprint import Fill, _may_split, _split_recursive
 from supportnode.geometry.objects.split_step import _STEP_MAX_EXTENT, _split_steps
 from supportnode.kernels.groups import group_rows
@@ -44,13 +48,16 @@ def _split_touching(
     origin: np.ndarray | None = None,
     groups: Groups | None = None,
     level: np.ndarray | None = None,
+    sparse: np.ndarray | None = None,
 ) -> np.ndarray:
     """Cut clusters whose x, y footprint has large parts joined by a neck (see _split_footprint),
     or else whose top steps between two flat levels side by side (see _split_step). memo: the
     cuts of clusters seen with the same points in the previous detection; origin: (3,) the
     sensor, metres, or None (what other clusters hide from it fills a footprint's notches);
     groups: ``group_rows(cp, lab, n)`` when the caller has it (layers.cut_layers); level:
-    (M,) bool, the points at their surface's level (see level.py), left out of footprints."""
+    (M,) bool, the points at their surface's level (see level.py), left out of footprints;
+    sparse: (M,) bool, the points of clusters too sparse for convexity (None: all), whose
+    walls may seed parts (see split_concave._split_walls)."""
     cell = params.cluster_cell / _SPLIT_CELL_DIVISOR
     radius = params.split_neck_width / 2.0
     n = int(lab.max()) + 1
@@ -86,20 +93,23 @@ def _split_touching(
         fill = functools.partial(_fill_xy, cp, lab, idx, point_bottom, lo[c], hi[c], params, origin)
         at = None if level is None else level[idx]
         at = at if at is not None and at.any() and not at.all() else None
+        walls = sparse is None or 2 * np.count_nonzero(sparse[idx]) > len(idx)
         if memo is None:  # the fill is found only for a cluster with a neck
             parts, n_parts, how = _split_one(
-                cp, idx, all_xy, extent, params, cell, radius, functools.cache(fill), at
+                cp, idx, all_xy, extent, params, cell, radius, functools.cache(fill), at, walls
             )
         else:  # a pure function of the cluster's points and of what fills its notches
             fill_xy = fill()
             key = [np.take(all_xy, idx, axis=0), fill_xy]
             if at is not None:  # which points are at the level: after a row of NaN
                 key += [np.full((1, 2), np.nan), np.c_[np.flatnonzero(at), np.zeros(at.sum())]]
+            if not walls:
+                key.append(np.full((1, 2), np.inf))
             parts, n_parts, how = memo.get(
                 "split",
                 np.concatenate(key),
                 functools.partial(
-                    _split_one, cp, idx, all_xy, extent, params, cell, radius, fill_xy, at
+                    _split_one, cp, idx, all_xy, extent, params, cell, radius, fill_xy, at, walls
                 ),
             )
         if how is not None:
@@ -191,13 +201,16 @@ def _split_one(
     radius: float,
     fill: Fill = None,
     level: np.ndarray | None = None,
+    walls: bool = True,
 ) -> tuple[np.ndarray, int, str | None]:
     """Parts (P,) of the cluster of points cp[idx] (x, y footprint extent in metres), their
     number, and the stats key of the rule that cut it ("step_splits", "concave_splits"; None
     for a neck or no cut). fill: what fills its footprint's notches (see _fill_xy and
     split_footprint.Fill). level: (P,) bool, its points at the surface's level: left out of
     the footprint (the table's skirt would fill its necks) and the step rule (it would be a
-    flat level of its own), each in the part of its nearest other point in x, y."""
+    flat level of its own), each in the part of its nearest other point in x, y. walls: a
+    sparse cluster, which may be cut where its walls part at concave creases (a dense one was
+    segmented by convexity at a finer cell)."""
     xy_c = np.take(all_xy, idx, axis=0)
     own = np.arange(len(idx)) if level is None else np.flatnonzero(~level)
     xy_own = xy_c if level is None else np.take(xy_c, own, axis=0)
@@ -217,6 +230,15 @@ def _split_one(
         conc = _split_concave(p_c, params.cluster_cell, params.concave_tolerance, params.min_points)
         if conc is not None:
             return conc, int(conc.max()) + 1, "concave_splits"
+    if walls and dense and extent <= _CONCAVE_MAX_EXTENT:
+        seeded = _split_walls(
+            p_c if level is None else p_c[own],
+            params.cluster_cell,
+            params.concave_tolerance,
+            params.min_points,
+        )
+        if seeded is not None:
+            return _with_level(seeded, level, xy_c), int(seeded.max()) + 1, "wall_splits"
     return _with_level(parts, level, xy_c), n_parts, None
 
 
