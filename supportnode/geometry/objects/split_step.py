@@ -82,6 +82,7 @@ def _split_step(p: np.ndarray, cell: float, min_points: int) -> tuple[np.ndarray
     part = _by_level(p, lo, cell, np.array([np.median(t) for t in tops]))
     if part is None:
         return None, True
+    part = _by_plateau(part, key, cells, plateau, big, (h, w))
     counts = np.bincount(part, minlength=2)
     if counts.min() < min_points:
         return None, True
@@ -148,6 +149,34 @@ def _beside_free(
         if (rim & near_free).sum() < _STEP_RIM_FREE * rim.sum():
             return False
     return True
+
+
+def _by_plateau(
+    part: np.ndarray,
+    key: np.ndarray,
+    cells: np.ndarray,
+    plateau: np.ndarray,
+    big: np.ndarray,
+    shape: tuple[int, int],
+) -> np.ndarray:
+    """(P,) part 0 or 1 of each point: that of its coarse cell (flat index key (P,) on the
+    (H, W) = shape raster) when the cell is in one of the two plateaus big (2,) (of plateau
+    (C,), per occupied cell cells (C,)) and borders no cell of the other, else ``part`` (P,)
+    (by the finer raster, see _by_level). A box's side holds points at every height: in a fine
+    cell of its own, without its top, the highest of them may match the other level."""
+    h, w = shape
+    grid = np.full((h + 2, w + 2), -1, np.int64)  # an empty border: no wrap at the edges
+    i, j = np.divmod(cells, w)
+    grid[i + 1, j + 1] = np.where(plateau == big[0], 0, np.where(plateau == big[1], 1, -1))
+    near = [np.zeros((h, w), bool), np.zeros((h, w), bool)]
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            shifted = grid[1 + di : h + 1 + di, 1 + dj : w + 1 + dj]
+            near[0] |= shifted == 0
+            near[1] |= shifted == 1
+    own = grid[1:-1, 1:-1]
+    sure = ((own == 0) & ~near[1]) | ((own == 1) & ~near[0])
+    return np.where(sure.ravel()[key], own.ravel()[key], part)
 
 
 def _by_level(p: np.ndarray, lo: np.ndarray, cell: float, level: np.ndarray) -> np.ndarray | None:
