@@ -319,5 +319,10 @@ def _outer(xy: np.ndarray, parts: list[np.ndarray], voxel: float) -> list[np.nda
     group an outer wall; the inner arc of a barrel in a triangle, between its two contacts,
     is the same barrel's wall."""
     eq = ConvexHull(xy).equations  # (F, 3): n . p + d <= 0 inside, |n| = 1
-    edge = (xy @ eq[:, :2].T + eq[:, 2]).max(axis=1) >= -0.5 * voxel
-    return [rows for rows in parts if edge[rows].mean() >= _WALL_OUTER]
+    out = []
+    for rows in parts:  # only the seeds' points: a wall cluster holds 100k
+        seed = np.take(xy, rows, axis=0)
+        edge = (seed @ eq[:, :2].T + eq[:, 2]).max(axis=1) >= -0.5 * voxel
+        if edge.mean() >= _WALL_OUTER:
+            out.append(rows)
+    return out
