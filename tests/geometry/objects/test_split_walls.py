@@ -80,3 +80,23 @@ def test_single_sparse_objects_stay_whole(seed):
     res, labs = detect_parts(objects, table_surface(TABLE))
     assert len({whole(lab) for lab in labs}) == 4
     assert res.stats["wall_splits"] == 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_sparse_chair_and_a_person_are_not_cut_at_their_legs(seed):
+    """Legs are walls that stand on the floor apart from each other, joined above by a seat
+    or a torso: they meet in no crease, so no part is cut off."""
+    rng = np.random.default_rng(seed)
+    legs = [
+        box_faces((x, y, 0.0), (x + 0.03, y + 0.03, 0.43), rng, 0.02)
+        for x in (0.0, 0.42)
+        for y in (0.0, 0.42)
+    ]
+    seat = box_faces((0.0, 0.0, 0.43), (0.45, 0.45, 0.47), rng, 0.02)
+    back = box_faces((0.0, 0.42, 0.47), (0.45, 0.45, 0.9), rng, 0.02)
+    chair = np.concatenate([*legs, seat, back])
+    person_legs = [_can(1.0, y, 0.07, 0.8, 0.025, rng) - [0.0, 0.0, TABLE] for y in (0.0, 0.18)]
+    torso = box_faces((0.9, -0.08, 0.8), (1.1, 0.26, 1.5), rng, 0.025)
+    res, (a, b) = detect_parts([chair, np.concatenate([*person_legs, torso])], table_surface(0.0))
+    assert res.stats["wall_splits"] == 0 and res.stats["merged_splits"] == 0
+    assert whole(a) != np.bincount(b[b >= 0]).argmax()
