@@ -14,6 +14,7 @@ Points cp (M, 3) float64 metres, z up; labels (M,) int64, -1 = none.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -94,24 +95,8 @@ def _split_touching(
         at = None if level is None else level[idx]
         at = at if at is not None and at.any() and not at.all() else None
         walls = sparse is None or 2 * np.count_nonzero(sparse[idx]) > len(idx)
-        if memo is None:  # the fill is found only for a cluster with a neck
-            parts, n_parts, how = _split_one(
-                cp, idx, all_xy, extent, params, cell, radius, functools.cache(fill), at, walls
-            )
-        else:  # a pure function of the cluster's points and of what fills its notches
-            fill_xy = fill()
-            key = [np.take(all_xy, idx, axis=0), fill_xy]
-            if at is not None:  # which points are at the level: after a row of NaN
-                key += [np.full((1, 2), np.nan), np.c_[np.flatnonzero(at), np.zeros(at.sum())]]
-            if not walls:
-                key.append(np.full((1, 2), np.inf))
-            parts, n_parts, how = memo.get(
-                "split",
-                np.concatenate(key),
-                functools.partial(
-                    _split_one, cp, idx, all_xy, extent, params, cell, radius, fill_xy, at, walls
-                ),
-            )
+        split = functools.partial(_split_one, cp, idx, all_xy, extent, params, cell, radius)
+        parts, n_parts, how = _split_remembered(split, all_xy, idx, fill, at, walls, memo)
         if how is not None:
             stats[how] += 1
         if n_parts < 2:
@@ -123,6 +108,29 @@ def _split_touching(
         out[idx[rest]] = next_id + parts[rest] - 1
         next_id += n_parts - 1
     return out
+
+
+def _split_remembered(
+    split: Callable[..., tuple[np.ndarray, int, str | None]],
+    all_xy: np.ndarray,
+    idx: np.ndarray,
+    fill: Callable[[], np.ndarray],
+    at: np.ndarray | None,
+    walls: bool,
+    memo: Memo | None,
+) -> tuple[np.ndarray, int, str | None]:
+    """``split(fill, at, walls)`` (`_split_one` of the cluster of points idx), from the memo
+    when it holds the same cluster: the cut is a pure function of the cluster's points
+    all_xy[idx], of what fills its notches, of which are at the level and of ``walls``."""
+    if memo is None:  # the fill is found only for a cluster with a neck
+        return split(functools.cache(fill), at, walls)
+    fill_xy = fill()
+    key = [np.take(all_xy, idx, axis=0), fill_xy]
+    if at is not None:  # which points are at the level: after a row of NaN
+        key += [np.full((1, 2), np.nan), np.c_[np.flatnonzero(at), np.zeros(at.sum())]]
+    if not walls:
+        key.append(np.full((1, 2), np.inf))
+    return memo.get("split", np.concatenate(key), functools.partial(split, fill_xy, at, walls))
 
 
 def _standing_on(
