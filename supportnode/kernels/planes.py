@@ -132,6 +132,64 @@ def plane_inliers(
     return _inliers(lx, ly, lz, f, c, r, bx, by, t)
 
 
+@njit(cache=True, nogil=True)
+def _inlier_moments(lx, ly, lz, first, count, rel, bx, by, tol):
+    n = first.size
+    lo = np.empty((n, 2))
+    hi = np.empty((n, 2))
+    sums = np.empty((n, 3))
+    outer = np.empty((n, 6))
+    for p in range(n):
+        r0, r1, r2, b0, b1, t = rel[p, 0], rel[p, 1], rel[p, 2], bx[p], by[p], tol[p]
+        x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
+        sx = sy = sz = xx = yy = zz = xy = xz = yz = 0.0
+        for j in range(first[p], first[p] + count[p]):
+            ox, oy, oz = lx[j] - r0, ly[j] - r1, lz[j] - r2
+            if abs(ox * b0 + oy * b1 + oz) <= t:  # as _inliers counts them
+                x0, y0, x1, y1 = min(x0, ox), min(y0, oy), max(x1, ox), max(y1, oy)
+                sx += ox
+                sy += oy
+                sz += oz
+                xx += ox * ox
+                yy += oy * oy
+                zz += oz * oz
+                xy += ox * oy
+                xz += ox * oz
+                yz += oy * oz
+        lo[p, 0], lo[p, 1], hi[p, 0], hi[p, 1] = x0, y0, x1, y1
+        sums[p, 0], sums[p, 1], sums[p, 2] = sx, sy, sz
+        outer[p, 0], outer[p, 1], outer[p, 2] = xx, yy, zz
+        outer[p, 3], outer[p, 4], outer[p, 5] = xy, xz, yz
+    return lo, hi, sums, outer
+
+
+def inlier_moments(
+    local: list[np.ndarray],
+    first: np.ndarray,
+    count: np.ndarray,
+    rel: np.ndarray,
+    slope: tuple[np.ndarray, np.ndarray],
+    tol: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per run p, of its points that `plane_inliers` counts (same arguments), offsets o from
+    ``rel[p]``, metres: the x, y box lo, hi (P, 2) (inf, -inf for none), the sums (P, 3) of
+    o and of its products (P, 6) xx, yy, zz, xy, xz, yz (``voxels.OUTER_INDEX``), added in
+    the points' order. Raises ValueError as plane_inliers does."""
+    lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
+    if not len(lx) == len(ly) == len(lz):
+        raise ValueError("local columns must have one length")
+    f = np.ascontiguousarray(first, dtype=np.int64)
+    c = np.ascontiguousarray(count, dtype=np.int64)
+    r = np.ascontiguousarray(rel, dtype=np.float64).reshape(-1, 3)
+    bx, by = (np.ascontiguousarray(x, dtype=np.float64) for x in slope)
+    t = np.ascontiguousarray(tol, dtype=np.float64)
+    if not (len(c) == len(f) == len(r) == len(bx) == len(by) == len(t)):
+        raise ValueError("run and plane arrays must have one length")
+    if len(f) and ((f < 0).any() or (c < 0).any() or (f + c > len(lx)).any()):
+        raise ValueError("a run lies outside the points")
+    return _inlier_moments(lx, ly, lz, f, c, r, bx, by, t)
+
+
 @warmer
 def _warm() -> None:
     cols = [np.zeros(2), np.zeros(2), np.array([0.0, 0.5])]
@@ -140,3 +198,4 @@ def _warm() -> None:
     run = np.zeros(1, np.int64), np.full(1, 2, np.int64)
     label_by_planes(cols, *run, (one, one, one), np.zeros(1), np.full(1, 0.1), labels, best, True)
     plane_inliers(cols, *run, np.zeros((1, 3)), (one, one), np.full(1, 0.1))
+    inlier_moments(cols, *run, np.zeros((1, 3)), (one, one), np.full(1, 0.1))

@@ -121,3 +121,46 @@ def test_plane_inliers_refuse_runs_outside_the_points():
     one = np.zeros(1)
     with pytest.raises(ValueError, match="outside"):
         plane_inliers(cols, np.zeros(1), np.full(1, 3), np.zeros((1, 3)), (one, one), one)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 300), runs=st.integers(0, 12), seed=st.integers(0, 10_000))
+def test_inlier_moments_match_numpy_over_the_inliers(n, runs, seed):
+    from supportnode.kernels.planes import inlier_moments, plane_inliers
+
+    rng = np.random.default_rng(seed)
+    local = [rng.uniform(0, 0.1, n), rng.uniform(0, 0.1, n), rng.normal(0.02, 0.01, n)]
+    cuts = np.sort(rng.integers(0, n + 1, 2 * runs))
+    first, count = cuts[0::2], cuts[1::2] - cuts[0::2]
+    rel = rng.normal(0.03, 0.02, (runs, 3))
+    bx, by, tol = rng.normal(0, 0.1, runs), rng.normal(0, 0.1, runs), rng.uniform(0, 0.02, runs)
+    lo, hi, sums, outer = inlier_moments(local, first, count, rel, (bx, by), tol)
+    n_in = plane_inliers(local, first, count, rel, (bx, by), tol)
+    assert lo.shape == hi.shape == (runs, 2) and sums.shape == (runs, 3)
+    for p in range(runs):
+        idx = np.arange(first[p], first[p] + count[p])
+        o = np.stack([local[a][idx] - rel[p, a] for a in range(3)], axis=1)
+        o = o[np.abs(o[:, 0] * bx[p] + o[:, 1] * by[p] + o[:, 2]) <= tol[p]]
+        assert len(o) == n_in[p]  # the same points as plane_inliers counts
+        if len(o) == 0:
+            assert (lo[p] == np.inf).all() and (hi[p] == -np.inf).all()
+            assert (sums[p] == 0).all() and (outer[p] == 0).all()
+            continue
+        np.testing.assert_array_equal(lo[p], o[:, :2].min(axis=0))
+        np.testing.assert_array_equal(hi[p], o[:, :2].max(axis=0))
+        np.testing.assert_allclose(sums[p], o.sum(axis=0), rtol=1e-12, atol=1e-15)
+        want = [
+            (o[:, a] * o[:, b]).sum() for a, b in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+        ]
+        np.testing.assert_allclose(outer[p], want, rtol=1e-12, atol=1e-15)
+
+
+def test_inlier_moments_refuse_runs_outside_the_points():
+    from supportnode.kernels.planes import inlier_moments
+
+    cols = [np.zeros(2)] * 3
+    one = np.zeros(1)
+    with pytest.raises(ValueError, match="outside"):
+        inlier_moments(cols, np.zeros(1), np.full(1, 3), np.zeros((1, 3)), (one, one), one)
+    with pytest.raises(ValueError, match="one length"):
+        inlier_moments(cols, np.zeros(2), np.ones(2), np.zeros((1, 3)), (one, one), one)

@@ -93,7 +93,7 @@ def _fits(
     ``dst`` against the plane beside it, read from the grid's contiguous corner-relative
     columns (1-D gathers of runs)."""
     # Imported here: importing the geometry (as the wire's types do) must not load numba.
-    from supportnode.kernels.planes import plane_inliers
+    from supportnode.kernels.planes import inlier_moments, plane_inliers
 
     n_pts = grid.counts[dst]
     # The plane's point relative to the candidate voxel's corner, then per point.
@@ -108,47 +108,32 @@ def _fits(
     sel = np.flatnonzero((n_in > params.p_min) & (n_in >= params.absorb_min_fraction * n_pts))
     if len(sel) == 0:
         return out
-    n_sel = n_pts[sel]
-    first_sel = np.cumsum(n_sel) - n_sel
-    pos = np.repeat(grid.starts[dst[sel]] - first_sel, n_sel) + np.arange(n_sel.sum())
-    # Column by column: numpy reduces 1-D arrays much faster than (P, 3) along axis 0.
-    off = [grid.local[a][pos] - np.repeat(rel[sel, a], n_sel) for a in range(3)]
-    dist = np.abs(off[0] * np.repeat(bx[sel], n_sel) + off[1] * np.repeat(by[sel], n_sel) + off[2])
-    inlier = dist <= np.repeat(tol[sel], n_sel)
-    spread, level = _spread_level(off, inlier, first_sel, n_in[sel], params)
+    lo, hi, sums, outer = inlier_moments(
+        grid.local, grid.starts[dst[sel]], n_pts[sel], rel[sel], (bx[sel], by[sel]), tol[sel]
+    )
+    spread, level = _spread_level(lo, hi, sums, outer, n_in[sel], params)
     out[sel] = np.where(spread & level, n_in[sel], 0)
     return out
 
 
 def _spread_level(
-    off: list[np.ndarray],
-    inlier: np.ndarray,
-    first: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    sums: np.ndarray,
+    outer: np.ndarray,
     n_in: np.ndarray,
     params: SurfaceParams,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per trial (runs starting at ``first`` of the points' offsets ``off``, three columns):
-    whether its inliers spread over a quarter of the cell in x and y, and whether they are
-    themselves a level patch (a ramp crosses a level plane in a band that would otherwise
-    pass, voxel after voxel along its contour)."""
+    """Per trial (its inliers' x, y box lo, hi (T, 2), sums (T, 3) and products (T, 6), see
+    `kernels.planes.inlier_moments`, and count n_in (T,)): whether they spread over a quarter
+    of the cell in x and y, and whether they are themselves a level patch (a ramp crosses a
+    level plane in a band that would otherwise pass, voxel after voxel along its contour)."""
     min_spread = 0.25 * np.asarray(params.plane_voxel[:2])
-    lo = np.stack(
-        [np.minimum.reduceat(np.where(inlier, off[a], np.inf), first) for a in range(2)],
-        axis=1,
-    )
-    hi = np.stack(
-        [np.maximum.reduceat(np.where(inlier, off[a], -np.inf), first) for a in range(2)],
-        axis=1,
-    )
-    w = inlier.astype(np.float64)
     cnt = np.maximum(n_in, 1)
-    mean_in = [np.add.reduceat(off[a] * w, first) / cnt for a in range(3)]
+    mean_in = [sums[:, a] / cnt for a in range(3)]
     # The inliers' covariance entries as columns, in OUTER_INDEX order.
     _, n_in_plane = sym3_eigen_entries(
-        *(
-            np.add.reduceat(off[a] * off[b] * w, first) / cnt - mean_in[a] * mean_in[b]
-            for a, b in OUTER_INDEX
-        )
+        *(outer[:, k] / cnt - mean_in[a] * mean_in[b] for k, (a, b) in enumerate(OUTER_INDEX))
     )
     level = np.abs(n_in_plane[:, 2]) >= np.cos(np.radians(params.max_tilt_deg))
     return np.all(hi - lo >= min_spread, axis=1), level
