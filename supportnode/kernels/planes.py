@@ -117,6 +117,18 @@ def plane_inliers(
     plane through ``rel[p]`` (P, 3) with ``slope`` (bx, by), each (P,): |(x - rx) bx +
     (y - ry) by + (z - rz)| <= tol. One pass over the runs' points, no (N,) temporaries.
     Raises ValueError on shapes or runs outside the points."""
+    return _inliers(*_runs(local, first, count, rel, slope, tol))
+
+
+def _runs(
+    local: list[np.ndarray],
+    first: np.ndarray,
+    count: np.ndarray,
+    rel: np.ndarray,
+    slope: tuple[np.ndarray, np.ndarray],
+    tol: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """The arguments of `plane_inliers` as its kernels take them: contiguous, checked."""
     lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
     if not len(lx) == len(ly) == len(lz):
         raise ValueError("local columns must have one length")
@@ -129,7 +141,7 @@ def plane_inliers(
         raise ValueError("run and plane arrays must have one length")
     if len(f) and ((f < 0).any() or (c < 0).any() or (f + c > len(lx)).any()):
         raise ValueError("a run lies outside the points")
-    return _inliers(lx, ly, lz, f, c, r, bx, by, t)
+    return lx, ly, lz, f, c, r, bx, by, t
 
 
 @njit(cache=True, nogil=True)
@@ -175,19 +187,7 @@ def inlier_moments(
     ``rel[p]``, metres: the x, y box lo, hi (P, 2) (inf, -inf for none), the sums (P, 3) of
     o and of its products (P, 6) xx, yy, zz, xy, xz, yz (``voxels.OUTER_INDEX``), added in
     the points' order. Raises ValueError as plane_inliers does."""
-    lx, ly, lz = (np.ascontiguousarray(c, dtype=np.float64) for c in local)
-    if not len(lx) == len(ly) == len(lz):
-        raise ValueError("local columns must have one length")
-    f = np.ascontiguousarray(first, dtype=np.int64)
-    c = np.ascontiguousarray(count, dtype=np.int64)
-    r = np.ascontiguousarray(rel, dtype=np.float64).reshape(-1, 3)
-    bx, by = (np.ascontiguousarray(x, dtype=np.float64) for x in slope)
-    t = np.ascontiguousarray(tol, dtype=np.float64)
-    if not (len(c) == len(f) == len(r) == len(bx) == len(by) == len(t)):
-        raise ValueError("run and plane arrays must have one length")
-    if len(f) and ((f < 0).any() or (c < 0).any() or (f + c > len(lx)).any()):
-        raise ValueError("a run lies outside the points")
-    return _inlier_moments(lx, ly, lz, f, c, r, bx, by, t)
+    return _inlier_moments(*_runs(local, first, count, rel, slope, tol))
 
 
 @warmer

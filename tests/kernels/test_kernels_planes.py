@@ -92,17 +92,24 @@ def test_warm_up_is_registered():
     _warm()
 
 
-@settings(max_examples=60, deadline=None)
-@given(n=st.integers(0, 300), runs=st.integers(0, 12), seed=st.integers(0, 10_000))
-def test_plane_inliers_count_as_numpys_vectorised_test(n, runs, seed):
-    from supportnode.kernels.planes import plane_inliers
-
+def _random_runs(n: int, runs: int, seed: int) -> tuple:
+    """n points' local columns, ``runs`` runs over them (first, count) and a plane each
+    (rel (runs, 3), slopes bx, by, tolerance tol)."""
     rng = np.random.default_rng(seed)
     local = [rng.uniform(0, 0.1, n), rng.uniform(0, 0.1, n), rng.normal(0.02, 0.01, n)]
     cuts = np.sort(rng.integers(0, n + 1, 2 * runs))
     first, count = cuts[0::2], cuts[1::2] - cuts[0::2]
     rel = rng.normal(0.03, 0.02, (runs, 3))
     bx, by, tol = rng.normal(0, 0.1, runs), rng.normal(0, 0.1, runs), rng.uniform(0, 0.02, runs)
+    return local, first, count, rel, bx, by, tol
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 300), runs=st.integers(0, 12), seed=st.integers(0, 10_000))
+def test_plane_inliers_count_as_numpys_vectorised_test(n, runs, seed):
+    from supportnode.kernels.planes import plane_inliers
+
+    local, first, count, rel, bx, by, tol = _random_runs(n, runs, seed)
     got = plane_inliers(local, first, count, rel, (bx, by), tol)
     pos = np.concatenate([np.arange(f, f + c) for f, c in zip(first, count, strict=True)] or [[]])
     pos = pos.astype(np.int64)
@@ -128,12 +135,7 @@ def test_plane_inliers_refuse_runs_outside_the_points():
 def test_inlier_moments_match_numpy_over_the_inliers(n, runs, seed):
     from supportnode.kernels.planes import inlier_moments, plane_inliers
 
-    rng = np.random.default_rng(seed)
-    local = [rng.uniform(0, 0.1, n), rng.uniform(0, 0.1, n), rng.normal(0.02, 0.01, n)]
-    cuts = np.sort(rng.integers(0, n + 1, 2 * runs))
-    first, count = cuts[0::2], cuts[1::2] - cuts[0::2]
-    rel = rng.normal(0.03, 0.02, (runs, 3))
-    bx, by, tol = rng.normal(0, 0.1, runs), rng.normal(0, 0.1, runs), rng.uniform(0, 0.02, runs)
+    local, first, count, rel, bx, by, tol = _random_runs(n, runs, seed)
     lo, hi, sums, outer = inlier_moments(local, first, count, rel, (bx, by), tol)
     n_in = plane_inliers(local, first, count, rel, (bx, by), tol)
     assert lo.shape == hi.shape == (runs, 2) and sums.shape == (runs, 3)
