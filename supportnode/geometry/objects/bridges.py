@@ -184,9 +184,13 @@ def _bays(occ: np.ndarray) -> tuple[np.ndarray, float]:
     bay (a connected set of empty cells inside its convex hull) reaches in from the hull's
     edge, and how far its own cells lie from the footprint's edge."""
     cells = np.argwhere(occ).astype(float)
-    if len(cells) < 4 or np.linalg.matrix_rank(cells - cells[0]) < 2:
+    if len(cells) < 4 or _collinear(cells):
         return np.zeros(0), 0.0
-    eq = ConvexHull(cells).equations  # n . x + d <= 0 inside
+    # The hull of the cells on the footprint's rim (a cell between its four neighbours lies
+    # inside theirs): the same hull, from a fraction of the cells.
+    rim = occ.copy()
+    rim[1:-1, 1:-1] &= ~(occ[:-2, 1:-1] & occ[2:, 1:-1] & occ[1:-1, :-2] & occ[1:-1, 2:])
+    eq = ConvexHull(np.argwhere(rim).astype(float)).equations  # n . x + d <= 0 inside
     empty = np.argwhere(~occ)
     to_edge = -(empty.astype(float) @ eq[:, :2].T + eq[:, 2])
     inside = (to_edge >= -1e-9).all(axis=1)
@@ -196,6 +200,14 @@ def _bays(occ: np.ndarray) -> tuple[np.ndarray, float]:
     depth = np.zeros(n)
     np.maximum.at(depth, label[bay_cells] - 1, to_edge[inside].min(axis=1))
     return depth, float(distance_transform(occ).max()) - 0.5  # as split_raster
+
+
+def _collinear(p: np.ndarray) -> bool:
+    """Whether the lattice points p (P, 2) (integers as floats) lie on one line: exact, as a
+    rank below 2 of ``p - p[0]``."""
+    d = p - p[0]
+    far = d[np.abs(d).sum(axis=1).argmax()]  # a non-zero direction unless all coincide
+    return bool((d[:, 0] * far[1] - d[:, 1] * far[0] == 0).all())
 
 
 def _hidden(

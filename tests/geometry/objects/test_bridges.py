@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from shadows import seen
 
 from supportnode.geometry.objects.bridges import split_bridges, split_necks
@@ -170,3 +172,17 @@ def test_an_l_shaped_top_has_one_bay_and_stays_whole():
     part, _ = _necks(np.concatenate([a, b]))
     assert len(np.unique(part)) == 2
     assert part[0] != part[-1]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    pts=st.lists(st.tuples(st.integers(-6, 6), st.integers(-6, 6)), min_size=1, max_size=9),
+    line=st.booleans(),
+)
+def test_collinear_is_a_rank_below_two(pts, line):
+    from supportnode.geometry.objects.bridges import _collinear
+
+    p = np.array(pts, dtype=float)
+    if line:  # points on one lattice line through the first
+        p = p[0] + np.arange(len(p))[:, None] * (p[-1] - p[0])
+    assert _collinear(p) == (np.linalg.matrix_rank(p - p[0]) < 2)
