@@ -176,7 +176,8 @@ def _order(
     n = int(lab.max()) + 1
     # Grouped by label (a counting sort, stable): each cluster's points a contiguous run, in
     # input order; with each cluster's box.
-    bounds, _, in_clusters, mins, maxs = group_rows(cp, lab, n)
+    groups = group_rows(cp, lab, n)
+    bounds, _, in_clusters, mins, maxs = groups
     counts = np.diff(bounds)
     present = np.flatnonzero(counts > 0)
     # Ties in size broken by the lowest corner: invariant to point order and to translation.
@@ -205,4 +206,5 @@ def _order(
         _grouped=in_clusters,
         _runs=runs,
         _heights={lk.id: lk.height for lk in lookups},
+        _groups=groups,
     )

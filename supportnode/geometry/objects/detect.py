@@ -294,7 +294,9 @@ def split_objects(
     if params.split_touching and len(lab):
         groups = None
         if components._sparse is not None:  # with the level points: bottoms measured on them
-            split, groups = cut_layers(cp, split, components._sparse, known, params, stats)
+            split, groups = cut_layers(
+                cp, split, components._sparse, known, params, stats, components.segmentation._groups
+            )
         level = None
         if len(near):  # footprints without them (see level)
             level = np.zeros(len(cp), bool)

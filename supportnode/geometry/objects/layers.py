@@ -62,19 +62,21 @@ def cut_layers(
     supports: np.ndarray,
     params: ObjectParams,
     stats: dict,
+    groups: Groups | None = None,
 ) -> tuple[np.ndarray, Groups | None]:
     """(M,) labels of the candidates cp (M, 3) with the sparse clusters' stacks cut apart
     (new parts take ids after the others), and, when nothing was cut, the labels' rows
     (`kernels.groups.group_rows`: the footprint splits need them too). sparse: (M,) bool, the points of the clusters the
     convex segmentation left whole; a cluster is tried when most of its points are and it
     stands on a surface (supports: (C,) the surface under each label, -1 none: a wall, the
-    frame of a shelf, a chair's back hold nothing that stands)."""
+    frame of a shelf, a chair's back hold nothing that stands). groups: ``group_rows(cp,
+    lab, n)`` when the caller has it (`clusters._order` made it)."""
     n = int(lab.max()) + 1 if len(lab) else 0
     out = lab.copy()
     if n == 0:
         return out, None
     clear = _CLEAR_CELLS * params.cluster_cell
-    groups = group_rows(cp, lab, n)
+    groups = group_rows(cp, lab, n) if groups is None else groups
     start, order, _, lo, hi = groups
     size = np.diff(start)
     tall = hi[:, 2] - lo[:, 2] >= _MIN_TOP + 2 * clear

@@ -83,6 +83,9 @@ class Segmentation:
     _grouped: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
     _runs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64), repr=False)
     _heights: dict = field(default_factory=dict, repr=False)
+    # `kernels.groups.group_rows` of the labels the clusters were ordered from (their old
+    # ids): start, rows, points, lo, hi; None when not kept.
+    _groups: tuple | None = field(default=None, repr=False)
 
 
 @dataclass

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.kernels.components import label_edges
+from supportnode.kernels.groups import label_boxes
 
 # An upward face (normal within _UP_DEG of +z, at least _TOP_POINTS points) at least
 # _MIN_TOP above its surface can hold another object.
@@ -57,15 +58,14 @@ def cut_stacks(
         return seg
     on = face >= 0
     pts = np.bincount(face[on], weights=count[on], minlength=n_face)
-    low = np.full(n_face, np.inf)
-    np.minimum.at(low, face[on], above[on])
+    low = label_boxes(above[:, None], face, n_face)[0][:, 0]  # np.minimum.at's values
     tops = np.flatnonzero(
         (face_up >= np.cos(np.radians(_UP_DEG))) & (pts >= _TOP_POINTS) & (low >= _MIN_TOP)
     )
     # Higher tops first: a stack of three parts its top box before its middle one.
-    height = np.zeros(n_face)
-    np.add.at(height, face[on], centroid[on, 2] * count[on])
-    height = height / np.maximum(pts, 1)
+    # bincount adds in input order, as np.add.at does (the same sums), at a tenth of its cost.
+    weighted = np.bincount(face[on], weights=centroid[on, 2] * count[on], minlength=n_face)
+    height = weighted / np.maximum(pts, 1)
     for t in tops[np.argsort(-height[tops])]:
         _cut_at(t, height[t], centroid, count, face, seg, src, dst, clearance, min_points)
     return seg
