@@ -14,6 +14,7 @@ _WARMERS: list[Callable[[], None]] = []
 _LOCK = threading.Lock()
 _WARMED: set[Callable[[], None]] = set()  # warm-ups already run in this process
 _configured = False
+_threads: int | None = None  # the budget configure() was given (None: all cores)
 
 
 def warmer(fn: Callable[[], None]) -> Callable[[], None]:
@@ -73,7 +74,7 @@ def configure(threads: int | None = None) -> str:
     keeps numba's default (all cores). Returns the layer's name once a parallel kernel ran, or
     the requested policy before that.
     """
-    global _configured
+    global _configured, _threads
     import numba
 
     # numba.config sets its attributes at import time, from the environment: untyped.
@@ -83,11 +84,24 @@ def configure(threads: int | None = None) -> str:
             config.THREADING_LAYER = "threadsafe"
             _configured = True
         if threads is not None:
-            numba.set_num_threads(max(1, min(int(threads), config.NUMBA_NUM_THREADS)))
+            _threads = max(1, min(int(threads), config.NUMBA_NUM_THREADS))
+            # numba's count is the calling thread's own: each worker thread applies the
+            # budget itself (apply_threads).
+            numba.set_num_threads(_threads)
     try:
         return str(numba.threading_layer())
     except ValueError:  # no parallel kernel has run yet
         return "threadsafe"
+
+
+def apply_threads() -> None:
+    """Bound the calling thread's parallel kernels by the configured budget: numba's thread
+    count is per thread, and :func:`configure` set only its caller's (a node's detecting
+    thread calls this once it starts)."""
+    if _threads is not None:
+        import numba
+
+        numba.set_num_threads(_threads)
 
 
 def warm(modules: Iterable[str] | None = None) -> float:

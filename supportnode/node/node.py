@@ -40,6 +40,7 @@ from supportnode import bus
 from supportnode._closing import Closing
 from supportnode.errors import InputError, SupportNodeError
 from supportnode.geometry.transform import quaternion_matrix
+from supportnode.kernels import runtime
 from supportnode.msgs import Diagnostics, PointCloud
 from supportnode.node.admission import Admission
 from supportnode.node.core import Job, MapLike, NodeCore, NodeOutput
@@ -307,6 +308,7 @@ class Node(Closing):
 
     def _detect_loop(self) -> None:
         """Detecting thread: take the latest job, detect, publish; until the node stops."""
+        runtime.apply_threads()  # node.threads: numba's count is set per thread
         while not self._stop.is_set():
             job = self._mailbox.take(_POLL_S)
             if job is not None:

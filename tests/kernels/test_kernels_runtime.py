@@ -76,3 +76,37 @@ def test_keep_freed_memory_takes_on_glibc_and_is_a_no_op_elsewhere():
         assert took
     else:
         assert took is False
+
+
+def test_the_thread_budget_reaches_a_worker_thread_that_applies_it():
+    """numba's thread count is per thread: configure() sets its caller's only, and a worker
+    (the node's detecting thread) takes the same budget with apply_threads()."""
+    import threading
+
+    import numba
+
+    seen = {}
+
+    def work():
+        runtime.apply_threads()
+        seen["threads"] = numba.get_num_threads()
+
+    runtime.configure(threads=1)
+    try:
+        worker = threading.Thread(target=work)
+        worker.start()
+        worker.join()
+    finally:
+        runtime.configure(threads=numba.config.NUMBA_NUM_THREADS)
+    assert seen["threads"] == 1
+
+
+def test_the_nodes_detecting_thread_applies_the_thread_budget(monkeypatch):
+    from supportnode.node import Node
+
+    calls = []
+    monkeypatch.setattr(runtime, "apply_threads", lambda: calls.append(1))
+    with Node() as node:
+        node._stop.set()  # the loop ends at once, after its set-up
+        node._detect_loop()
+    assert calls == [1]
