@@ -204,15 +204,20 @@ def cluster_convex(
 
     The candidates' connected voxels (:func:`clusters._cluster_voxel`, as the voxel method)
     that are sampled densely enough to show faces (a depth camera's view: a cell of
-    ``convex_cell``, or 1.5 times it, wide against the points' spacing)
-    are segmented by local convexity on cells of that size; sparser ones (a lidar's far
-    returns, a thinly sampled map) stay whole, to be split by their footprints. In the dense
+    ``convex_cell``, 1.5 or 2.25 times it, wide against the points' spacing, and against
+    their noise: :func:`quiet_levels`) are segmented by local convexity on cells of that
+    size; sparser or noisier ones (a lidar's far returns, a thinly sampled map, a depth
+    camera's view at 2 m and beyond) stay whole, to be split by their footprints. In the dense
     ones the points in the noise band of the surface under them (support: (M,) its id, -1
     for none) are the table's and never link two objects: the surface's own band
     (:meth:`Surface.band_width` at the point's range; 1 m when the sensor is unknown)."""
     comp = _cluster_voxel(cp, params.cluster_cell, stats, support)
     voxel = stats.pop("_voxel_of_point", np.zeros(len(cp), np.int64))
     level = cell_levels(cp, comp, voxel, params)
+    if (level < len(CELL_STEPS)).any():
+        above, band, sigma = _band(cp, support, surfaces, origin)
+        noise = _noise(comp, level, sigma)
+        level = quiet_levels(level, noise, params.convex_cell)
     dense = level < len(CELL_STEPS)
     stats["dense_components"] = int(dense.sum())
     dense_point = dense[comp]  # gathered once
@@ -221,8 +226,7 @@ def cluster_convex(
         return comp  # its labels 0..C-1 are all used
     out = np.where(dense_point, -1, comp)
     _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
-    above, band, sigma = _band(cp, support, surfaces, origin)
-    window = _windows(comp, level, sigma, params)
+    window = _windows(level, noise, params)
     free = dense_point & (above > band)
     stats["band_points"] = int((dense_point & ~free).sum())
     base = int(out.max()) + 1 if (out >= 0).any() else 0
@@ -258,9 +262,11 @@ def cluster_convex(
 
 # The convex cell sizes a component may take (times objects.convex_cell): the first at least
 # _CELL_PER_SPACING times its points' spacing (its surfaces stay connected cell to cell, and
-# a gap a few spacings wide still cuts); sparser components are not segmented. Its normals'
-# window spans at least _WINDOW_SIGMAS noise sigmas (at most _MAX_WINDOW cells each side).
-CELL_STEPS = (1.0, 1.5)
+# a gap a few spacings wide still cuts), the coarsest only at _CELL_SIGMAS times its noise
+# (see quiet_levels); sparser or noisier components are not segmented. Its normals' window spans at least
+# _WINDOW_SIGMAS noise sigmas (at most _MAX_WINDOW cells each side).
+CELL_STEPS = (1.0, 1.5, 2.25)
+_CELL_SIGMAS = 3.0
 _CELL_PER_SPACING = 2.5
 _WINDOW_SIGMAS = 8.0
 _MAX_WINDOW = 5
@@ -305,23 +311,47 @@ def cell_levels(
     return level
 
 
-def _windows(
-    comp: np.ndarray, level: np.ndarray, sigma: np.ndarray, params: ObjectParams
-) -> np.ndarray:
-    """Per component (C,) of :func:`cell_levels`' levels: its normal window in cells, at
-    least ``convex_normal_cells``, spanning _WINDOW_SIGMAS of its median noise. sigma: (M,)
-    each point's noise (its surface's at its range; 0 when unknown), metres."""
-    low = params.convex_normal_cells
-    window = np.full(len(level), low, np.int64)
+def _noise(comp: np.ndarray, level: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """Per component (C,): the median noise of its points (of up to ~200 of them), metres,
+    for the components :func:`cell_levels` found dense (0 for the others). sigma: (M,) each
+    point's noise (its surface's at its range; 0 when unknown), metres."""
+    noise = np.zeros(len(level))
     dense = np.flatnonzero(level < len(CELL_STEPS))
     if len(dense) == 0:
-        return window
+        return noise
     order = np.argsort(comp, kind="stable")
     bounds = np.searchsorted(comp[order], np.arange(len(level) + 1))
-    noise = np.zeros(len(level))
     for k in dense:
         mine = order[bounds[k] : bounds[k + 1]]
         noise[k] = np.median(sigma[mine[:: max(1, len(mine) // 200)]])
+    return noise
+
+
+def quiet_levels(level: np.ndarray, noise: np.ndarray, convex_cell: float) -> np.ndarray:
+    """(C,) the levels of :func:`cell_levels`, those of the coarsest cell dropped (not
+    segmented: len(CELL_STEPS)) where the cell is under _CELL_SIGMAS times the component's
+    noise (C,), metres.
+
+    Two things thin a depth camera's points: a coarser image (a 320 x 240 camera), which
+    keeps them as quiet, and range, which makes them noisier with its square. Cells a few
+    spacings wide part the first at its creases; in the second the noise across a cell
+    bends the normals more than the creases do, and convexity cuts an object into pieces
+    (a desk's far side at 2 m). The finer cells are left to the spacing alone: a view that
+    dense is near, and its noise is what the faces' growth allows for."""
+    out = np.asarray(level).copy()
+    last = len(CELL_STEPS) - 1
+    out[(out == last) & (convex_cell * CELL_STEPS[last] < _CELL_SIGMAS * noise)] = last + 1
+    return out
+
+
+def _windows(level: np.ndarray, noise: np.ndarray, params: ObjectParams) -> np.ndarray:
+    """Per component (C,) of :func:`cell_levels`' levels: its normal window in cells, at
+    least ``convex_normal_cells``, spanning _WINDOW_SIGMAS of its median noise (C,) metres
+    (:func:`_noise`)."""
+    low = params.convex_normal_cells
+    window = np.full(len(level), low, np.int64)
+    if not (level < len(CELL_STEPS)).any():
+        return window
     step = np.asarray(CELL_STEPS + (CELL_STEPS[-1],))[level]
     wide = np.ceil(_WINDOW_SIGMAS * noise / (2.0 * params.convex_cell * step)).astype(np.int64)
     return np.clip(wide, low, max(low, _MAX_WINDOW))

@@ -313,3 +313,40 @@ def test_cluttered_table_from_around_it(pose):
             mine = lab[v.object == g]
             share = np.bincount(mine[mine >= 0]).max() / len(mine)
             assert share >= 0.9, f"{name}: {share:.2f} in one cluster"
+
+
+def test_quiet_levels_drop_only_a_noisy_component_from_the_coarsest_cell():
+    """The coarsest cell (2.25 x convex_cell) is for a coarse image, whose points stay quiet,
+    not for a far view, whose noise grows with the range: noisy components there are left
+    to the footprint splits; the finer cells are the spacing's alone."""
+    from supportnode.geometry.objects.convexity import CELL_STEPS, quiet_levels
+
+    last, sparse = len(CELL_STEPS) - 1, len(CELL_STEPS)
+    level = np.array([0, 1, last, last, sparse])
+    noise = np.array([0.004, 0.004, 0.001, 0.004, 0.001])  # metres
+    out = quiet_levels(level, noise, 0.005)  # a 11.25 mm cell holds 3 sigmas of 3.75 mm
+    assert out.tolist() == [0, 1, last, sparse, sparse]
+    assert level.tolist() == [0, 1, last, last, sparse]  # not changed in place
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["two_cans_1cm_apart", "can_against_box", "three_cans_oblique"])
+def test_a_320_by_240_view_still_parts_round_objects(name):
+    """Every other row and column of the Kinect view (a 320 x 240 depth camera, points ~4 mm
+    apart at 1 m): the objects are segmented by convexity on coarser cells, not left to
+    their footprints, which cannot part two round objects that touch."""
+    c = case(name, seed=0, frame="optical")
+    h, w = c.cloud.image_shape
+    rows = np.arange(h * w).reshape(h, w)[::2, ::2].ravel()
+    pts, truth = c.cloud.points[rows], c.cloud.object[rows]
+    ok = np.isfinite(pts[:, 0])
+    params = load_config(None, [])
+    d = detect(pts[ok].astype(float), params, align=True, sensor_origin=np.zeros(3))
+    truth, lab = truth[ok], d.objects.labels
+    for g in np.unique(truth[truth >= 0]):
+        mine = truth == g
+        best = np.bincount(lab[mine & (lab >= 0)]).argmax()
+        share = (lab[mine] == best).mean()
+        purity = (mine & (lab == best)).sum() / (lab == best).sum()
+        who = c.scene.object_names[g]
+        assert share >= 0.85 and purity >= 0.85, f"{name}: {who} {share:.2f}/{purity:.2f}"
