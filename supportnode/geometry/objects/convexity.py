@@ -336,11 +336,14 @@ def quiet_levels(level: np.ndarray, noise: np.ndarray, convex_cell: float) -> np
     keeps them as quiet, and range, which makes them noisier with its square. Cells a few
     spacings wide part the first at its creases; in the second the noise across a cell
     bends the normals more than the creases do, and convexity cuts an object into pieces
-    (a desk's far side at 2 m). The finer cells are left to the spacing alone: a view that
-    dense is near, and its noise is what the faces' growth allows for."""
+    (a desk's far side at 2 m). Nor where no noise was measured (0: no surface under it
+    has a depth camera's band): a sampled mesh or a map seen from all sides puts both faces
+    of a thin wall (a bowl's) in one such cell. The finer cells are left to the spacing
+    alone: a view that dense is near, and its noise is what the faces' growth allows for."""
     out = np.asarray(level).copy()
     last = len(CELL_STEPS) - 1
-    out[(out == last) & (convex_cell * CELL_STEPS[last] < _CELL_SIGMAS * noise)] = last + 1
+    cell = convex_cell * CELL_STEPS[last]
+    out[(out == last) & ((noise <= 0) | (cell < _CELL_SIGMAS * noise))] = last + 1
     return out
 
 
