@@ -294,7 +294,7 @@ def _candidates_below(
             and _within(ring, sorted_keys[j]).mean() >= _TOP_MIN_AROUND
             # Cells are coarse: a box's footprint cells also hold the worktop beside it, but
             # a surface in most of the inner cells is plainly seen under the face.
-            and not (len(inner) and _within(inner, sorted_keys[j]).mean() >= 0.5)
+            and not (len(inner) and _within(inner, sorted_keys[j]).mean() > 0.5)
         ]
         if under:
             below[i] = under
