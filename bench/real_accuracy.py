@@ -285,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.docs:
         cmd = docs_command("real_accuracy.py", argv)
         # A coarser camera's table beside the full one, not over it.
-        block = "real_accuracy" + (f"_decimate{args.decimate}" if args.decimate > 1 else "")
+        block = "real_accuracy" + (f".decimate{args.decimate}" if args.decimate > 1 else "")
         write_docs_block(REPO / "docs/accuracy.md", block, text, cmd, load)
     return 0
 
