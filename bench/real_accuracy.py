@@ -216,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--per-scan", action="store_true", help="print a row per scan")
     ap.add_argument("--docs", action="store_true", help="write the table into docs/accuracy.md")
     args = ap.parse_args(argv)
+    if args.every < 1 or args.decimate < 1:
+        ap.error(f"--every and --decimate must be at least 1, got {args.every}, {args.decimate}")
     from supportnode.config import load_config
     from supportnode.io.clouds import read_cloud
     from supportnode.kernels import runtime

@@ -84,6 +84,8 @@ def test_ab_bad_arguments_are_one_line_errors(args, message):
         ("bench_compiled.py", ["--repeats", "-2"], "--scans and --repeats must be at least 1"),
         ("bench_locality.py", ["--from-scan", "59"], "--from-scan must be at least 0 and below"),
         ("bench_locality.py", ["--margin", "nan"], "--margin: expected a finite number >= 0"),
+        ("real_accuracy.py", ["--decimate", "0"], "--every and --decimate must be at least 1"),
+        ("real_accuracy.py", ["--every", "-1"], "--every and --decimate must be at least 1"),
     ],
 )
 def test_other_bench_scripts_bad_flags_are_one_line_errors(script, args, message):
