@@ -87,7 +87,7 @@ class SurfaceParams:
         max=5,
     )
     absorb_steps: int = param(
-        3,
+        4,
         "planar: rings of cluttered voxels (a board's edge by a panel, the foot of an "
         "object) a surface may grow into when part of their points lie on its plane",
         min=0,

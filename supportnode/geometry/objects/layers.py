@@ -6,7 +6,8 @@ The convex segmentation parts a dense stack at its concave creases (:mod:`stacks
 cluster has no creases to find, only heights. A horizontal face puts many points at one
 height: a *level*. What rises from a level, within the face's outline, stands on it when
 - the face shows beyond it (a box's own scan line at that height lies under the rest of the
-  box: nothing of it shows beyond; the top of a box under a smaller box does),
+  box: nothing of it shows beyond; the top of a box under a smaller box does, turned or not:
+  see `rising`),
 - its lowest points reach down to the level and spread at least a third as wide as it does
   (a lamp's shade on its thin stem is one object with its base; a box on a box, a bowl on a
   board, fruit in a bowl are two),
@@ -23,9 +24,11 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
+from supportnode.geometry.objects.rising import Footprint, footprint
 from supportnode.geometry.objects.stacks import _INSIDE, _MAX_BESIDE, _MIN_SHARE, _MIN_TOP
 from supportnode.kernels.groups import group_rows
 from supportnode.kernels.layers import may_hold, screen_levels
+from supportnode.kernels.turned import outside_turned
 from supportnode.params import ObjectParams
 
 # `kernels.groups.group_rows`' answer: start, rows, points, lo, hi.
@@ -138,6 +141,7 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
         min_up,
         _BEYOND * min_face,
     )
+    whole = _turned(xy, a, b, u, whole, min_up, _BEYOND * min_face)
     if not whole.any():
         return None  # no level of the uncut cluster: nothing is ever cut
     part = np.zeros(len(q), np.int64)
@@ -146,12 +150,12 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     for i, level in enumerate(levels.tolist()):
         if n_parts == 1 and not whole[i]:
             continue
-        box = _rising_box(xy, part, n_parts, (a[i], b[i], u[i]), min_points, (above[0], above[1]))
-        if box is None:
+        rising = _rising(xy, part, n_parts, (a[i], b[i], u[i]), min_points, above)
+        if rising is None:
             continue
-        mine = everything if n_parts == 1 else part == box[2]
+        mine = everything if n_parts == 1 else part == rising[1]
         at = a[i] + np.flatnonzero(mine[a[i] : b[i]])
-        cut = _cut_at(q, mine, at, u[i], level, clear, min_points, box[:2])
+        cut = _cut_at(q, mine, at, u[i], level, clear, min_points, rising[0])
         for rows in cut:
             part[rows] = n_parts
             n_parts += 1
@@ -162,37 +166,53 @@ def _cut(p: np.ndarray, clear: float, min_points: int) -> np.ndarray | None:
     return out
 
 
-def _rising_box(
+def _turned(
+    xy: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    u: np.ndarray,
+    whole: np.ndarray,
+    min_up: float,
+    min_out: float,
+) -> np.ndarray:
+    """``whole`` (L,) from `kernels.layers.screen_levels`, with the levels that show beyond
+    what rises from them only past its turned box (see `rising`) added: xy (P, 2) by height;
+    a, b, u (L,): each level's slab and first row above its clearance (`kernels.turned`)."""
+    out = whole.copy()
+    n = len(xy)
+    todo = np.flatnonzero(~whole & (a < b) & (n - u >= min_up) & (u < n))
+    out[todo] = outside_turned(xy, a[todo], b[todo], u[todo], _SLAB) >= min_out
+    return out
+
+
+def _rising(
     xy: np.ndarray,
     part: np.ndarray,
     n_parts: int,
     rows: tuple[int, int, int],
     min_points: int,
-    above: tuple[np.ndarray, np.ndarray],
-) -> tuple[np.ndarray, np.ndarray, int] | None:
-    """The x, y box (lo, hi (2,), grown by _SLAB) of what rises from a level and the part
+    above: list[np.ndarray],
+) -> tuple[Footprint, int] | None:
+    """The footprint (grown by _SLAB, see `rising`) of what rises from a level and the part
     holding the level, or None when too little rises or too little of the level lies outside
-    that box to show beyond it. xy: (P, 2) the cluster's points by height; part: (P,) their
-    parts so far (n_parts of them); rows: the level's slab [a, b) and first row above its
-    clearance u; above: the suffix boxes (with nothing cut yet, the answer: see
-    `kernels.layers.screen_levels`)."""
+    that footprint to show beyond it. xy: (P, 2) the cluster's points by height; part: (P,)
+    their parts so far (n_parts of them); rows: the level's slab [a, b) and first row above
+    its clearance u; above: the suffix boxes (with nothing cut yet, the level was screened:
+    see `kernels.layers.screen_levels`, `_turned`)."""
     a, b, u = rows
     if n_parts == 1:
-        return above[0][u] - _SLAB, above[1][u] + _SLAB, 0
+        return footprint(xy[u:], _SLAB, (above[0][u], above[1][u])), 0
     if a == b:
         return None
     holder = int(np.bincount(part[a:b]).argmax())
     mine = part == holder
     if mine[u:].sum() < max(min_points, _MIN_SHARE * mine.sum()):
         return None
-    rows_up = u + np.flatnonzero(mine[u:])
-    lo = xy[rows_up].min(axis=0) - _SLAB
-    hi = xy[rows_up].max(axis=0) + _SLAB
-    at = a + np.flatnonzero(mine[a:b])
-    outside = ~np.all((xy[at] >= lo) & (xy[at] <= hi), axis=1)
+    fp = footprint(xy[u + np.flatnonzero(mine[u:])], _SLAB)
+    outside = ~fp.inside(xy[a + np.flatnonzero(mine[a:b])])
     if outside.sum() < _BEYOND * _face_points(min_points):
         return None
-    return lo, hi, holder
+    return fp, holder
 
 
 def _cut_at(
@@ -203,12 +223,12 @@ def _cut_at(
     level: float,
     clear: float,
     min_points: int,
-    box: tuple[np.ndarray, np.ndarray],
+    rising: Footprint,
 ) -> list[np.ndarray]:
     """The parts standing on the face at ``level`` of the holder ``mine`` (P,) bool of the
     cluster q (P, 3) sorted by height: the rows of each (its side just above the face
     included). at: the holder's rows at the level; u: the first row above its clearance;
-    box: the x, y box of what of the holder rises from it."""
+    rising: the footprint of what of the holder rises from it."""
     z, xy = q[:, 2], q[:, :2]
     # What lies under the level's slab (a 2 cm board's sides are all below its top).
     under = int(np.searchsorted(z, level - 1.5 * _SLAB))
@@ -226,11 +246,10 @@ def _cut_at(
     if len(face) < min_face:
         return []
     fxy = xy[face]
-    # A face wholly under what rises from it. (Its box, not its hull: tested against the
-    # hull, a box turned on the box under it was cut off in the sampled shelf, but on the
-    # TUM desk a keyboard-high face cut off all that stands behind it, and the monitors,
-    # thin strips once apart from it, no longer split from each other.)
-    if np.all((fxy >= box[0]) & (fxy <= box[1]), axis=1).mean() > 1.0 - _BEYOND:
+    # A face wholly under what rises from it. (Its boxes, not its hull: tested against the
+    # hull, on the TUM desk a keyboard-high face cut off all that stands behind it, and the
+    # monitors, thin strips once apart from it, no longer split from each other.)
+    if rising.inside(fxy).mean() > 1.0 - _BEYOND:
         return []
     rows = u + np.flatnonzero(mine[u:])
     comp = _cluster_voxel(q[rows], 2.0 * clear, {})
