@@ -20,6 +20,7 @@ import numpy as np
 
 from supportnode.errors import InputError
 from supportnode.geometry.memo import Memo
+from supportnode.geometry.objects.attached import join_attached
 from supportnode.geometry.objects.clusters import (
     _cluster_knn,
     _cluster_voxel,
@@ -141,6 +142,9 @@ def _components(
     level_xyz = np.take(pts, level, axis=0)
     near = nearest_bottom(level_xyz, cp, lab, bottom, params.cluster_cell)
     lab = _drop_small(lab, params.min_points, lab[near[near >= 0]])  # the level points count
+    if params.method != "knn":
+        heights = {s.id: s.height for s in surfaces.surfaces}
+        lab = join_attached(cp, lab, support, heights)
     claimed = np.zeros(0, np.int64)
     if params.foot_reach > 0 and any(s.band[0] > 0 for s in surfaces.surfaces) and len(lab):
         if params.method == "knn":

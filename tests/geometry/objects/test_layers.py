@@ -60,6 +60,50 @@ def test_a_box_on_a_box_is_two_objects_the_upper_on_the_lower():
     assert res.clusters[ia].surface_id == 0 and res.clusters[ib].surface_id == 0
 
 
+def _turned(p: np.ndarray, deg: float, centre=(0.0, 0.0)) -> np.ndarray:
+    """p turned by deg about the vertical through centre (x, y)."""
+    t = np.radians(deg)
+    c = np.asarray(centre, float)
+    rot = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    return np.c_[(p[:, :2] - c) @ rot.T + c, p[:, 2]]
+
+
+@pytest.mark.parametrize(("deg", "seed"), [(45.0, 0), (40.0, 1), (-30.0, 2)])
+def test_a_box_turned_on_a_box_is_its_own_object(deg, seed):
+    """The upper box turned: the lower box's top shows at its corners, outside the upper's
+    turned box but inside its axis-aligned one (the sampled shelf's stacks)."""
+    rng = np.random.default_rng(seed)
+    top = TABLE + 0.08
+    lower = _box((-0.1, -0.1, TABLE), (0.1, 0.1, top), rng)
+    under = _turned(lower, -deg)  # the lower box's points in the upper box's frame
+    covered = np.all(np.abs(under[:, :2]) <= 0.07, axis=1) & (lower[:, 2] >= top - 1e-3)
+    upper = _turned(_box((-0.07, -0.07, top), (0.07, 0.07, top + 0.07), rng), deg)
+    res, (a, b) = _detect([lower[~covered], upper])
+    ia, ib = whole(a), whole(b)
+    assert ia != ib
+    assert res.clusters[ib].supported_by == ia
+
+
+def test_the_footprint_of_what_rises_is_inside_both_of_its_boxes():
+    from supportnode.geometry.objects.rising import footprint
+
+    rng = np.random.default_rng(5)
+    flat = np.c_[rng.uniform(-0.08, 0.08, 400), rng.uniform(-0.06, 0.06, 400), np.zeros(400)]
+    box = _turned(flat, 10)[:, :2]
+    fp = footprint(box, 0.005)
+    assert fp.inside(box).all()
+    # The corners of its axis-aligned box are outside the turned box; beyond both, outside.
+    corners = np.array([[fp.lo[0], fp.lo[1]], [fp.hi[0], fp.hi[1]], [0.3, 0.0]])
+    assert not fp.inside(corners).any()
+    # An axis-aligned set: its turned box is its axis-aligned box.
+    square = np.c_[rng.uniform(0, 0.1, 200), rng.uniform(0, 0.05, 200)]
+    grid = np.stack(np.meshgrid(np.linspace(-0.01, 0.11, 25), np.linspace(-0.01, 0.06, 15)), -1)
+    grid = grid.reshape(-1, 2)
+    fp = footprint(square, 0.002)
+    in_box = np.all((grid >= fp.lo) & (grid <= fp.hi), axis=1)
+    np.testing.assert_array_equal(fp.inside(grid), in_box)
+
+
 def test_a_sphere_in_a_low_bowl_is_its_own_object():
     rng = np.random.default_rng(1)
     base = _without(
@@ -210,9 +254,10 @@ def test_may_hold_passes_over_a_single_box_but_not_a_stack():
     assert may_hold(np.r_[lower, upper], 0.005, 0.015, 30.0, 2.25)
 
 
-def test_the_sampled_shelfs_top_box_is_its_own_object_on_the_stack():
-    # The shelf's three boxes sampled sparsely (150k points for the whole room): the top
-    # box's face under it shows a rim of 10-14 flat points, which must be enough.
+def test_the_sampled_shelfs_stacked_boxes_are_objects_each_on_the_one_below():
+    # The shelf's boxes sampled sparsely (150k points for the whole room): the top box's
+    # face under it shows a rim of 10-14 flat points, which must be enough; the middle box
+    # is turned 10 degrees on the bottom one.
     from supportnode.config import load_config
     from supportnode.pipeline import detect
     from supportnode.sim import load_scene
@@ -222,7 +267,15 @@ def test_the_sampled_shelfs_top_box_is_its_own_object_on_the_stack():
     cloud = sampled(scene, 150_000, seed=0)
     det = detect(cloud.points.astype(np.float64), load_config(None, []))
     names = list(scene.object_names)
-    top = whole(det.objects.labels[cloud.object == names.index("stack_a_3")])
-    under = whole(det.objects.labels[cloud.object == names.index("stack_a_2")])
-    assert top != under
-    assert det.objects.clusters[top].supported_by == under
+    for upper, lower in [("stack_a_3", "stack_a_2"), ("stack_a_2", "stack_a_1")]:
+        top = whole(det.objects.labels[cloud.object == names.index(upper)])
+        under = whole(det.objects.labels[cloud.object == names.index(lower)])
+        assert top != under
+        assert det.objects.clusters[top].supported_by == under
+    # The other stack (its upper box turned 8 degrees) by the shelf's side panel, and the
+    # lamp, whose stem meets its shade where nothing is seen, held up by it: one object.
+    top = whole(det.objects.labels[cloud.object == names.index("stack_b_2")])
+    under = whole(det.objects.labels[cloud.object == names.index("stack_b_1")])
+    assert det.objects.clusters[top].supported_by == under != top
+    assert det.objects.clusters[under].surface_id == det.objects.clusters[top].surface_id
+    whole(det.objects.labels[cloud.object == names.index("lamp")])
