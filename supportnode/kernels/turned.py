@@ -16,47 +16,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from supportnode.kernels.hull import _chain
 from supportnode.kernels.runtime import warmer
 
 __all__ = ["outside_turned"]
-
-# Relative round-off below which three points are on one line (as `kernels.hull`).
-_COLLINEAR = 1e-12
-
-
-@njit(cache=True, nogil=True)
-def _left(ox, oy, ax, ay, bx, by):  # type: ignore[no-untyped-def]
-    ux, uy, vx, vy = ax - ox, ay - oy, bx - ox, by - oy
-    return ux * vy - uy * vx > _COLLINEAR * (abs(ux) + abs(uy)) * (abs(vx) + abs(vy))
 
 
 @njit(cache=True, nogil=True)
 def _hull(px, py):  # type: ignore[no-untyped-def]
     """Hull vertices (counter-clockwise, no collinear ones) of the points px, py (K,)."""
-    k = len(px)
     order = np.argsort(py, kind="mergesort")
     order = order[np.argsort(px[order], kind="mergesort")]  # by x, then y
-    out = np.empty(2 * k + 1, np.int64)
-    m = 0
-    for j in range(k):  # lower chain
-        i = order[j]
-        while m >= 2 and not _left(
-            px[out[m - 2]], py[out[m - 2]], px[out[m - 1]], py[out[m - 1]], px[i], py[i]
-        ):
-            m -= 1
-        out[m] = i
-        m += 1
-    low = m + 1
-    for j in range(k - 2, -1, -1):  # upper chain
-        i = order[j]
-        while m >= low and not _left(
-            px[out[m - 2]], py[out[m - 2]], px[out[m - 1]], py[out[m - 1]], px[i], py[i]
-        ):
-            m -= 1
-        out[m] = i
-        m += 1
-    m = max(m - 1, 1) if k > 1 else k  # the last point repeats the first
-    return out[:m]
+    ring = np.empty(2 * len(px) + 1, np.int64)
+    return ring[: _chain(px, py, order, ring)]
 
 
 @njit(cache=True, nogil=True)
