@@ -225,7 +225,7 @@ class TrackUpdate:
 class _Track:
     id: int
     cells: np.ndarray  # packed, sorted
-    height: float
+    height: np.ndarray  # (K,) its heights (see OverlapTracker.update)
     group: int
     misses: int = 0
     hits: int = 1
@@ -235,7 +235,8 @@ class OverlapTracker:
     """Persistent ids for footprints on a fixed grid.
 
     min_iou: smallest footprint IoU for a detection to continue a track.
-    height_tolerance: largest height difference (metres) between a track and its detection.
+    height_tolerance: largest height difference (metres) between a track and its detection; with
+    several heights each (a cluster's bottom and top), one of them within it is enough.
     max_misses: consecutive updates a track may go unmatched before it is reported gone.
     Detections and tracks may carry a ``group`` (e.g. the stable id of the surface a cluster
     stands on); with ``match_groups`` only equal groups match.
@@ -259,9 +260,14 @@ class OverlapTracker:
 
     @property
     def tracks(self) -> dict[int, dict]:
-        """Live tracks by id: packed cells, height, misses, hits (copies of small fields)."""
+        """Live tracks by id: packed cells, height (the first), misses, hits."""
         return {
-            t.id: {"cells": t.cells, "height": t.height, "misses": t.misses, "hits": t.hits}
+            t.id: {
+                "cells": t.cells,
+                "height": float(t.height[0]),
+                "misses": t.misses,
+                "hits": t.hits,
+            }
             for t in self._tracks
         }
 
@@ -274,9 +280,11 @@ class OverlapTracker:
         """Match one scan's detections to the tracks.
 
         cells: per detection, (C, 2) int footprint cells on the tracker's fixed grid.
-        heights: (D,) float64 metres. groups: (D,) int or None.
+        heights: (D,) or (D, K) float64 metres (K heights each: one within the tolerance of
+        the track's matches). groups: (D,) int or None.
         """
-        heights = np.asarray(heights, dtype=np.float64).reshape(-1)
+        heights = np.asarray(heights, dtype=np.float64)
+        heights = heights.reshape(len(heights), -1) if heights.ndim > 1 else heights[:, None]
         if len(cells) != len(heights):
             raise InputError(f"{len(cells)} footprints but {len(heights)} heights")
         d = len(cells)
@@ -290,10 +298,11 @@ class OverlapTracker:
         d = len(packed)
         tracks = self._tracks
         iou = overlap_matrix(packed, [t.cells for t in tracks])
-        t_height = np.array([t.height for t in tracks])
         ok = iou >= self.min_iou
         if len(tracks):
-            ok &= np.abs(heights[:, None] - t_height[None, :]) <= self.height_tolerance
+            t_height = np.array([t.height for t in tracks]).reshape(len(tracks), -1)
+            near = np.abs(heights[:, None, :] - t_height[None, :, :]) <= self.height_tolerance
+            ok &= near.any(axis=2)
             if self.match_groups:
                 ok &= grp[:, None] == np.array([t.group for t in tracks])[None, :]
         # Hungarian on IoU; pairs below the gates cost more than leaving both unmatched.
@@ -305,12 +314,12 @@ class OverlapTracker:
             if ok[r, c]:
                 t = tracks[c]
                 ids[r] = t.id
-                t.cells, t.height, t.group = packed[r], float(heights[r]), int(grp[r])
+                t.cells, t.height, t.group = packed[r], heights[r].copy(), int(grp[r])
                 t.misses, t.hits = 0, t.hits + 1
                 matched[c] = True
         out = TrackUpdate(ids)
         for r in np.flatnonzero(ids < 0):  # new detections: a handful per scan
-            t = _Track(self._next_id, packed[r], float(heights[r]), int(grp[r]))
+            t = _Track(self._next_id, packed[r], heights[r].copy(), int(grp[r]))
             self._next_id += 1
             tracks.append(t)
             ids[r] = t.id
@@ -341,8 +350,10 @@ class SurfaceTracker(OverlapTracker):
 
 class ClusterTracker(OverlapTracker):
     """Stable ids for :class:`~supportnode.geometry.objects.Cluster` lists: footprint polygons
-    rasterised on a ``cell_size`` grid, height = bottom of the bounding box; ``group`` = the
-    stable id of the surface under the cluster (-1 for none)."""
+    rasterised on a ``cell_size`` grid, heights = bottom and top of the bounding box (either
+    within the tolerance: an object first seen by its top over what hides the rest, then
+    whole, keeps its id); ``group`` = the stable id of the surface under the cluster (-1 for
+    none)."""
 
     def __init__(self, cell_size: float = 0.02, **kw) -> None:
         kw.setdefault("height_tolerance", 0.05)
@@ -360,7 +371,7 @@ class ClusterTracker(OverlapTracker):
         cells = dict(zip((keys[i] for i in miss), fresh, strict=True))
         packed = [cells[k] if k in cells else self._cells[k] for k in keys]
         self._cells = dict(zip(keys, packed, strict=True))
-        bottoms = np.array([float(c.bbox_min[2]) for c in clusters])
+        ends = np.array([[c.bbox_min[2], c.bbox_max[2]] for c in clusters], np.float64)
         grp = (
             np.full(len(clusters), -1, np.int64)
             if surface_ids is None
@@ -368,4 +379,4 @@ class ClusterTracker(OverlapTracker):
         )
         if len(grp) != len(clusters):
             raise InputError(f"{len(clusters)} clusters but {len(grp)} surface ids")
-        return self._update_packed(packed, bottoms, grp)
+        return self._update_packed(packed, ends.reshape(len(clusters), 2), grp)

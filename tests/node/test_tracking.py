@@ -84,9 +84,10 @@ def test_height_gate_and_clusters():
     assert up.new == [1]
 
     class C:  # the fields of Cluster the tracker reads
-        def __init__(self, x, z):
+        def __init__(self, x, z, top=None):
             self.footprint = np.array([[x, 0.0], [x + 0.2, 0.0], [x + 0.2, 0.1], [x, 0.1]])
             self.bbox_min = np.array([x, 0.0, z])
+            self.bbox_max = np.array([x + 0.2, 0.1, z + 0.1 if top is None else top])
 
     ct = ClusterTracker(cell_size=0.02, match_groups=True)
     ids = ct.update_clusters([C(0.0, 0.75), C(0.5, 0.75)], np.array([1, 1])).ids
@@ -94,6 +95,12 @@ def test_height_gate_and_clusters():
     assert list(again) == [ids[1], ids[0]]
     moved = ct.update_clusters([C(0.0, 0.75)], np.array([2])).ids  # now on another surface
     assert moved[0] not in ids
+    # A lamp first seen by its shade over what hides its stem, then whole: its bottom drops
+    # 18 cm, its top stays: the same object. Both ends moved: another one.
+    ct = ClusterTracker(cell_size=0.02)
+    first = ct.update_clusters([C(0.0, 0.98, top=1.09)]).ids[0]
+    assert ct.update_clusters([C(0.0, 0.80, top=1.09)]).ids[0] == first
+    assert ct.update_clusters([C(0.0, 0.60, top=0.70)]).ids[0] != first
 
 
 def test_polygon_cells_and_bad_input():
