@@ -10,13 +10,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from supportnode.kernels.hull3d import FAILED, hull_volume
 from supportnode.kernels.lines import column_ends
 from supportnode.kernels.rects import min_area_boxes
-
-try:  # scipy's wrapper of Qhull, under ConvexHull since scipy 0.12 (private: kept optional)
-    from scipy.spatial._qhull import _Qhull
-except ImportError:  # pragma: no cover - a scipy that moved it: ConvexHull itself
-    _Qhull = None
 
 # Clusters of more points than this take their 3-D hull from the ends of their vertical lines
 # (see _column_ends) and, if still more, from an even sample of those (see _hull_candidates).
@@ -49,18 +45,12 @@ def _hull_candidates(p: np.ndarray) -> np.ndarray:
 
 
 def _hull_3d(q: np.ndarray) -> float:
-    """Volume (m^3) of the convex hull of q (Q, 3); 0 when Qhull finds it degenerate."""
-    try:
-        if _Qhull is None:
-            return float(ConvexHull(q).volume)
-        # ConvexHull's own run of Qhull ("Qt", triangulated, then the volume), without the
-        # simplex, neighbour and equation arrays it builds next: 20 % of its time here.
-        qh = _Qhull(b"i", np.ascontiguousarray(q, dtype=np.double), b"", required_options=b"Qt")
-        try:
-            qh.triangulate()
-            return float(qh.volume_area()[0])
-        finally:
-            qh.close()
+    """Volume (m^3) of the convex hull of q (Q, 3); 0 when it is flat."""
+    volume = hull_volume(np.ascontiguousarray(q, dtype=np.float64))
+    if volume != FAILED:
+        return float(volume)
+    try:  # round-off broke the compiled hull's faces (near-coplanar slivers): Qhull merges
+        return float(ConvexHull(q).volume)
     except (QhullError, ValueError):
         return 0.0
 
