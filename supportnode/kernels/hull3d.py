@@ -88,22 +88,30 @@ def _simplex(q: np.ndarray, tol: float) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def _faces(cap):  # type: ignore[no-untyped-def]
+    # Room for cap faces: vertices, planes, neighbours, outside sets (head, farthest point and
+    # its distance), live flags and visit marks.
+    return (
+        np.empty((cap, 3), np.int64),
+        np.empty((cap, 4)),
+        np.empty((cap, 3), np.int64),
+        np.full(cap, -1, np.int64),
+        np.full(cap, -1, np.int64),
+        np.zeros(cap),
+        np.zeros(cap, np.bool_),
+        np.zeros(cap, np.int64),
+    )
+
+
+@njit(cache=True, nogil=True)
 def _grow(fv, planes, nb, head, far, fard, alive, seen):  # type: ignore[no-untyped-def]
-    # Twice the room for faces, their planes, neighbours, outside sets and marks.
-    cap = 2 * len(fv)
-    out_fv = np.empty((cap, 3), np.int64)
-    out_planes = np.empty((cap, 4))
-    out_nb = np.empty((cap, 3), np.int64)
-    out_head = np.full(cap, -1, np.int64)
-    out_far = np.full(cap, -1, np.int64)
-    out_fard = np.zeros(cap)
-    out_alive = np.zeros(cap, np.bool_)
-    out_seen = np.zeros(cap, np.int64)
+    # Twice the room, the faces so far copied over.
+    out = _faces(2 * len(fv))
     m = len(fv)
-    out_fv[:m], out_planes[:m], out_nb[:m] = fv, planes, nb
-    out_head[:m], out_far[:m], out_fard[:m] = head, far, fard
-    out_alive[:m], out_seen[:m] = alive, seen
-    return out_fv, out_planes, out_nb, out_head, out_far, out_fard, out_alive, out_seen
+    out[0][:m], out[1][:m], out[2][:m] = fv, planes, nb
+    out[3][:m], out[4][:m], out[5][:m] = head, far, fard
+    out[6][:m], out[7][:m] = alive, seen
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -244,14 +252,7 @@ def hull_volume(points: np.ndarray) -> float:
     cap = 64
     while cap < 8 * n:
         cap *= 2
-    fv = np.empty((cap, 3), np.int64)
-    planes = np.empty((cap, 4))
-    nb = np.empty((cap, 3), np.int64)
-    head = np.full(cap, -1, np.int64)
-    far = np.full(cap, -1, np.int64)
-    fard = np.zeros(cap)
-    alive = np.zeros(cap, np.bool_)
-    seen = np.zeros(cap, np.int64)
+    fv, planes, nb, head, far, fard, alive, seen = _faces(cap)
     a, b, c, d = simplex[0], simplex[1], simplex[2], simplex[3]
     # The tetrahedron's faces, counter-clockwise from outside (d is below a, b, c), and
     # their neighbours across edges 0 (v0 -> v1), 1 (v1 -> v2), 2 (v2 -> v0).

@@ -67,3 +67,17 @@ def test_unit_cube_and_tetrahedron():
     assert hull_volume(np.concatenate([cube, inner])) == pytest.approx(1.0, rel=1e-12)
     tetra = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     assert hull_volume(tetra) == pytest.approx(1 / 6, rel=1e-12)
+
+
+def test_room_for_faces_doubles_keeping_the_faces_so_far():
+    from supportnode.kernels.hull3d import _faces, _grow
+
+    faces = _faces(4)
+    faces[0][:] = np.arange(12).reshape(4, 3)
+    faces[3][:] = [5, -1, 7, -1]
+    faces[6][:] = [True, False, True, True]
+    grown = _grow(*faces)
+    assert len(grown[0]) == 8
+    np.testing.assert_array_equal(grown[0][:4], faces[0])
+    np.testing.assert_array_equal(grown[3], [5, -1, 7, -1, -1, -1, -1, -1])
+    np.testing.assert_array_equal(grown[6], [True, False, True, True] + [False] * 4)
