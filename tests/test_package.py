@@ -112,7 +112,7 @@ def test_built_wheel_installs_and_runs_the_demo_outside_the_repo(tmp_path: Path)
         check=True,
     ).stdout
     assert str(env_dir) in where
-    demo = run("launch", "demo", "--duration", "45", timeout=300)
+    demo = run("launch", "demo", "--duration", "60", timeout=300)
     assert demo.returncode == 0, demo.stderr[-2000:]
     lines = [
         ln for ln in demo.stdout.splitlines() if ln.startswith("[planner]") and "safe of" in ln

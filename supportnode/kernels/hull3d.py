@@ -108,9 +108,13 @@ def _grow(fv, planes, nb, head, far, fard, alive, seen):  # type: ignore[no-unty
     # Twice the room, the faces so far copied over.
     out = _faces(2 * len(fv))
     m = len(fv)
-    out[0][:m], out[1][:m], out[2][:m] = fv, planes, nb
-    out[3][:m], out[4][:m], out[5][:m] = head, far, fard
-    out[6][:m], out[7][:m] = alive, seen
+    for f in range(m):  # loops, not slice copies: those cost a fresh install compile time
+        for k in range(3):
+            out[0][f, k], out[2][f, k] = fv[f, k], nb[f, k]
+        for k in range(4):
+            out[1][f, k] = planes[f, k]
+        out[3][f], out[4][f], out[5][f] = head[f], far[f], fard[f]
+        out[6][f], out[7][f] = alive[f], seen[f]
     return out
 
 
@@ -133,9 +137,10 @@ def _assign(q, i, first, last, planes, alive, head, far, fard, nxt, tol) -> None
 def _expand(q, fv, planes, nb, head, far, fard, alive, seen, nxt, nf, tol):  # type: ignore[no-untyped-def]
     """Quickhull's loop from the simplex's faces (nf of them); the hull's volume, or -1.0."""
     n = len(q)
-    stack = np.empty(16, np.int64)
-    visible = np.empty(16, np.int64)
-    edges = np.empty((16, 2), np.int64)  # horizon: (visible face, its edge 0..2)
+    # Room for every face (a face is pushed and seen once a step) and three edges each.
+    stack = np.empty(len(fv), np.int64)
+    visible = np.empty(len(fv), np.int64)
+    edges = np.empty((3 * len(fv), 2), np.int64)  # horizon: (visible face, its edge 0..2)
     start_of = np.full(n, -1, np.int64)  # new face whose edge 0 starts at a vertex
     start_stamp = np.zeros(n, np.int64)
     stamp = 0
@@ -146,6 +151,10 @@ def _expand(q, fv, planes, nb, head, far, fard, alive, seen, nxt, nf, tol):  # t
             continue
         eye = far[f]
         stamp += 1
+        if len(visible) < len(fv):  # the faces grew last step: room for them all
+            stack = np.empty(len(fv), np.int64)
+            visible = np.empty(len(fv), np.int64)
+            edges = np.empty((3 * len(fv), 2), np.int64)
         # The faces the eye sees, connected to f; the edges where they meet the others.
         nv = ne = 0
         top = 1
@@ -154,8 +163,6 @@ def _expand(q, fv, planes, nb, head, far, fard, alive, seen, nxt, nf, tol):  # t
         while top > 0:
             top -= 1
             g = stack[top]
-            if nv == len(visible):
-                visible = np.concatenate((visible, np.empty(nv, np.int64)))
             visible[nv] = g
             nv += 1
             for k in range(3):
@@ -164,23 +171,15 @@ def _expand(q, fv, planes, nb, head, far, fard, alive, seen, nxt, nf, tol):  # t
                     continue
                 if _distance(planes[h], q, eye) > tol:
                     seen[h] = stamp
-                    if top == len(stack):
-                        stack = np.concatenate((stack, np.empty(top, np.int64)))
                     stack[top] = h
                     top += 1
                 else:
-                    if ne == len(edges):
-                        edges = np.concatenate((edges, np.empty((ne, 2), np.int64)))
                     edges[ne, 0], edges[ne, 1] = g, k
                     ne += 1
-        if nf + ne > len(fv):
+        while nf + ne > len(fv):
             fv, planes, nb, head, far, fard, alive, seen = _grow(
                 fv, planes, nb, head, far, fard, alive, seen
             )
-            while nf + ne > len(fv):
-                fv, planes, nb, head, far, fard, alive, seen = _grow(
-                    fv, planes, nb, head, far, fard, alive, seen
-                )
         # A cone of new faces (v0 -> v1 -> eye) over the horizon, linked across it.
         first = nf
         for e in range(ne):
@@ -240,12 +239,18 @@ def hull_volume(points: np.ndarray) -> float:
     n = len(points)
     if n < 4:
         return 0.0
-    centre = np.zeros(3)
+    # Centred: the volume's sum and the planes' offsets lose no bits. (Loops: array
+    # expressions cost a fresh install compile time.)
+    cx = cy = cz = 0.0
     for i in range(n):
-        centre += points[i]
-    centre /= n
-    q = points - centre  # centred: the volume's sum and the planes' offsets lose no bits
-    tol = _ROUNDOFF * max(np.abs(q).max(), 1e-300) * 8.0
+        cx, cy, cz = cx + points[i, 0], cy + points[i, 1], cz + points[i, 2]
+    cx, cy, cz = cx / n, cy / n, cz / n
+    q = np.empty((n, 3))
+    extent = 1e-300
+    for i in range(n):
+        q[i, 0], q[i, 1], q[i, 2] = points[i, 0] - cx, points[i, 1] - cy, points[i, 2] - cz
+        extent = max(extent, abs(q[i, 0]), abs(q[i, 1]), abs(q[i, 2]))
+    tol = _ROUNDOFF * extent * 8.0
     simplex = _simplex(q, tol)
     if len(simplex) < 4:
         return 0.0

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from supportnode.kernels.hull import _chain
+from supportnode.kernels.hull import _sorted_hull
 from supportnode.kernels.runtime import warmer
 
 __all__ = ["outside_turned"]
@@ -25,10 +25,9 @@ __all__ = ["outside_turned"]
 @njit(cache=True, nogil=True)
 def _hull(px, py):  # type: ignore[no-untyped-def]
     """Hull vertices (counter-clockwise, no collinear ones) of the points px, py (K,)."""
-    order = np.argsort(py, kind="mergesort")
-    order = order[np.argsort(px[order], kind="mergesort")]  # by x, then y
-    ring = np.empty(2 * len(px) + 1, np.int64)
-    return ring[: _chain(px, py, order, ring)]
+    # kernels.hull's own sort and chain: numba's generic sorts and fancy indexing cost a
+    # fresh install seconds of compiling.
+    return _sorted_hull(px, py, np.arange(len(px)))
 
 
 @njit(cache=True, nogil=True)
@@ -71,13 +70,16 @@ def _outside(xy, a, b, u, slab):  # type: ignore[no-untyped-def]
         if start < top:
             m = len(hx) + top - start
             px, py = np.empty(m), np.empty(m)
-            px[: len(hx)], py[: len(hx)] = hx, hy
+            for j in range(len(hx)):
+                px[j], py[j] = hx[j], hy[j]
             for r in range(start, top):
                 px[len(hx) + r - start], py[len(hx) + r - start] = xy[r, 0], xy[r, 1]
                 lo0, hi0 = min(lo0, xy[r, 0]), max(hi0, xy[r, 0])
                 lo1, hi1 = min(lo1, xy[r, 1]), max(hi1, xy[r, 1])
             keep = _hull(px, py)
-            hx, hy = px[keep], py[keep]
+            hx, hy = np.empty(len(keep)), np.empty(len(keep))
+            for j in range(len(keep)):
+                hx[j], hy[j] = px[keep[j]], py[keep[j]]
             top = start
         if len(hx) == 0:
             continue

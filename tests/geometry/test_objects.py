@@ -695,5 +695,5 @@ def test_hull_volume_falls_back_to_qhull(monkeypatch):
     from supportnode.kernels.hull3d import FAILED
 
     q = np.random.default_rng(5).normal(size=(60, 3))
-    monkeypatch.setattr(hull, "hull_volume", lambda p: FAILED)
+    monkeypatch.setattr("supportnode.kernels.hull3d.hull_volume", lambda p: FAILED)
     assert hull._hull_3d(q) == pytest.approx(ConvexHull(q).volume, rel=1e-12)

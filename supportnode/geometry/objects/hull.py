@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from supportnode.kernels.hull3d import FAILED, hull_volume
 from supportnode.kernels.lines import column_ends
 from supportnode.kernels.rects import min_area_boxes
 
@@ -46,6 +45,10 @@ def _hull_candidates(p: np.ndarray) -> np.ndarray:
 
 def _hull_3d(q: np.ndarray) -> float:
     """Volume (m^3) of the convex hull of q (Q, 3); 0 when it is flat."""
+    # Imported here: a node publishes no volumes, and its warm-up compiles every kernel
+    # module imported (this one costs a fresh install ~4 s).
+    from supportnode.kernels.hull3d import FAILED, hull_volume
+
     volume = hull_volume(np.ascontiguousarray(q, dtype=np.float64))
     if volume != FAILED:
         return float(volume)
