@@ -432,3 +432,23 @@ def test_gentle_ramp_joined_to_a_floor_stays_whole(rng, deg, max_tilt):
     res = detect_surfaces(pts, SurfaceParams(max_tilt_deg=max_tilt))
     assert len(res.surfaces) == 1
     assert (res.labels >= 0).mean() > 0.97
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_a_plank_on_a_board_leaves_the_board_around_it_on_the_board(seed):
+    """A small shelf unit's foot (a 1 cm plank, a panel on its edge) on a board: the voxels
+    holding the board and the plank's edge fit planes tilted 5-9 deg, and the cluttered
+    voxels beside them once took those planes, leaving the board 5-10 cm away unlabelled
+    (and free to join the objects on it into one)."""
+    rng = np.random.default_rng(seed)
+    board = plane_points(rng, -0.6, 0.6, -0.2, 0.2, 0.8, 60000)
+    cx, cy = 0.01 * seed, 0.01 + 0.01 * (seed % 5)  # across the voxel grid
+    under = (np.abs(board[:, 0] - cx) <= 0.1) & (np.abs(board[:, 1] - cy) <= 0.075)
+    board = board[~under]
+    plank = box_points(rng, (cx, cy, 0.805), (0.2, 0.15, 0.01), 4000)
+    panel = box_points(rng, (cx + 0.095, cy, 0.92), (0.01, 0.15, 0.22), 6000)
+    res = detect_surfaces(np.r_[board, plank, panel], SurfaceParams())
+    assert len(res.surfaces) == 1
+    away = np.maximum(np.abs(board[:, 0] - cx) - 0.1, np.abs(board[:, 1] - cy) - 0.075) > 0.05
+    assert (res.labels[: len(board)][away] == 0).all()
+    assert (res.labels[len(board) + len(plank) :] < 0).mean() > 0.9  # the panel is no board
