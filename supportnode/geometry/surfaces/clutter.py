@@ -80,12 +80,17 @@ def _untilt_steps(
     that a step tilts the normal of the surface around it. A voxel holding a board and the
     foot of a plank 1 cm up on it fits a plane tilted 5-9 deg, which, carried ring after ring,
     left the board 2 cm off it 20 cm away."""
+    cos_step = np.cos(np.radians(_STEP_TILT_DEG))
+    # A level voxel keeps its own plane (the common case: checked first, it costs nothing).
+    voxels = voxels[planes.normal[voxels, 2] < cos_step]
+    if len(voxels) == 0:
+        return
     voxels = voxels[_smooth(surface_of_voxel, planes, params)[surface_of_voxel[voxels]]]
     if len(voxels) == 0:
         return
     around = _local_normals(grid, index, surface_of_voxel, planes, voxels)
     own = planes.normal[voxels]
-    step = np.einsum("ij,ij->i", around, own) < np.cos(np.radians(_STEP_TILT_DEG))
+    step = np.einsum("ij,ij->i", around, own) < cos_step
     normal[voxels[step]] = around[step]
 
 
@@ -112,8 +117,12 @@ def _local_normals(
     offsets = np.concatenate([np.zeros((1, 3), np.int64), half, -half])
     j = index.neighbours_many(sv, offsets, grid.keys)  # (K, S)
     same = (j >= 0) & (surface_of_voxel[j.clip(0)] == surface_of_voxel[sv][None, :])
-    nrm = np.where(same[:, :, None], planes.normal[j.clip(0)], np.nan)
-    med = np.nanmedian(nrm, axis=0)  # itself is always there: no empty column
+    # The median of each column's valid rows: sorted, the missing ones (NaN) last.
+    nrm = np.sort(np.where(same[:, :, None], planes.normal[j.clip(0)], np.nan), axis=0)
+    n = same.sum(axis=0)[None, :, None]  # itself is always there: n >= 1
+    lo = np.take_along_axis(nrm, (n - 1) // 2, axis=0)[0]
+    hi = np.take_along_axis(nrm, n // 2, axis=0)[0]
+    med = 0.5 * (lo + hi)
     return med / np.maximum(np.linalg.norm(med, axis=1, keepdims=True), 1e-12)
 
 
