@@ -184,15 +184,15 @@ def test_node_publishes_only_to_authorised_clients(keys, tmp_path):
     folder = _node_folder(keys, tmp_path)
     with _curve_node(folder) as node:
         node.open()
-        assert node._pub is not None
+        assert node._sockets.pub is not None
         with (
             Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "client")) as sub,
             Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "stranger")) as drv,
             Subscriber(node.pub_endpoint, "scan", curve=_client_keys(keys, "server")) as own,
         ):
-            assert _gets_through(node._pub, sub, 5.0)
-            assert not _gets_through(node._pub, drv, 0.5)
-            assert not _gets_through(node._pub, own, 0.2)
+            assert _gets_through(node._sockets.pub, sub, 5.0)
+            assert not _gets_through(node._sockets.pub, drv, 0.5)
+            assert not _gets_through(node._sockets.pub, own, 0.2)
             deadline = time.monotonic() + 3
             while time.monotonic() < deadline:  # the refusals are counted by the node
                 if node.diagnostics().counters.get("handshake_failures_results_auth", 0) >= 2:

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from supportnode.cli import _process
 from supportnode.cli._common import add_config_arguments, positive_seconds
 from supportnode.cli._console import print_table
 from supportnode.cli._sequence import add_sequence_arguments, process_sequence
@@ -66,7 +67,7 @@ def _run_live(args: argparse.Namespace, params) -> int:
     # Sockets are opened inside spin and closed by the with block, also on SIGINT/SIGTERM,
     # which spin turns into a normal return (exit code 0).
     with Node(params) as node:
-        node.spin(duration=args.duration)
+        node.spin(duration=args.duration, on_ready=_process.freeze)
         c = node.diagnostics().counters  # refreshes the socket's received / dropped counts
         logging.getLogger("supportnode.node").info(
             "stopped: %d scans received, %d processed, %d dropped, %d rejected; "

@@ -62,6 +62,7 @@ log = logging.getLogger("supportnode.node")
 _POLL_S = 0.05
 # Points of the published map at most (3 MB a message): a map of millions of voxels is thinned.
 MAP_MAX_POINTS = 262_144
+Hook = Callable[[], None] | None  # `Node.spin`'s on_ready
 # The receiving thread's own counters (fixed keys: see `supportnode.node.diagnostics`).
 _OWN = ("diagnostics_sent", "diagnostics_failures", "maps_sent", "map_failures")
 
@@ -146,8 +147,7 @@ class Node(Closing):
         """Run one scan through gravity, map, detection and tracking; returns the messages.
 
         Raises InputError for a scan the node cannot use (no finite points, out of the map's
-        range: `supportnode.node.intake.scan_problem`); the map is then unchanged.
-        """
+        range: `supportnode.node.intake.scan_problem`); the map is then unchanged."""
         problem = scan_problem(cloud, self._wire.intake.limit)
         if problem is not None:
             raise InputError(f"scan seq {cloud.seq}: {problem.text}")
@@ -196,10 +196,6 @@ class Node(Closing):
         return self._sockets.sub
 
     @property
-    def _pub(self) -> bus.Publisher | None:
-        return self._sockets.pub
-
-    @property
     def pub_endpoint(self) -> str:  # resolved: the real port after binding tcp://host:*
         return self._sockets.pub_endpoint
 
@@ -213,13 +209,15 @@ class Node(Closing):
 
     # ------------------------------------------------------------------ spin
 
-    def spin(self, duration: float | None = None, handle_signals: bool = True) -> None:
+    def spin(
+        self, duration: float | None = None, handle_signals: bool = True, on_ready: Hook = None
+    ) -> None:
         """Receive scans and publish results until `stop`, SIGINT/SIGTERM or ``duration`` s.
 
         Compiles (or loads) the detection's kernels before subscribing, so the first scan is
-        not slow; publishes Diagnostics every ``node.diagnostics_period`` seconds. Signal
-        handlers are installed only from the main thread, and restored on return.
-        """
+        not slow, then calls ``on_ready`` (`supportnode run`: see `cli._process`); publishes
+        Diagnostics every ``node.diagnostics_period`` seconds. Signal handlers are installed
+        only from the main thread, and restored on return."""
         restore: dict[signal.Signals, Any] = {}
         if handle_signals and threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
@@ -228,6 +226,8 @@ class Node(Closing):
         try:
             self._warm()
             self.open()
+            if on_ready is not None:
+                on_ready()
             self._ready = True
             self._mailbox = Mailbox()
             detector = threading.Thread(target=self._detect_loop, name="detect", daemon=True)
@@ -244,7 +244,7 @@ class Node(Closing):
                 signal.signal(sig, old)
 
     def _warm(self) -> None:
-        """Compile (a fresh install: ~40 s on two cores) or load the kernels, saying so before and after."""
+        """Compile (a fresh install: ~40 s on two cores) or load the kernels, saying so."""
         self.log.info("%s: preparing kernels (first run after an install: ~40 s)", self.cfg.name)
         took = warm_up(self.params, self.cfg.threads or None)
         self.log.info("%s: kernels ready in %.2f s", self.cfg.name, took)
