@@ -47,6 +47,15 @@ def box_points(rng, center, size, n):
     return np.asarray(center) + p * np.asarray(size)
 
 
+def table_legs(rng, corners, top, n=600):
+    """(len(corners) * n, 3) points on round legs (2 cm radius) from the floor up to ``top``."""
+    legs = []
+    for x, y in corners:
+        t = rng.uniform(0, 2 * np.pi, n)
+        legs.append(np.c_[x + 0.02 * np.cos(t), y + 0.02 * np.sin(t), rng.uniform(0, top, n)])
+    return np.vstack(legs)
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)

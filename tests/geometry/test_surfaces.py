@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import box_points, plane_points
+from conftest import box_points, plane_points, table_legs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -262,21 +262,13 @@ def _without(pts, x0, x1, y0, y1):
     return pts[~inside]
 
 
-def _legs(rng, corners, top, n=600):
-    legs = []
-    for x, y in corners:
-        t = rng.uniform(0, 2 * np.pi, n)
-        legs.append(np.c_[x + 0.02 * np.cos(t), y + 0.02 * np.sin(t), rng.uniform(0, top, n)])
-    return np.vstack(legs)
-
-
 def test_top_of_a_box_on_a_table_is_an_object_not_a_surface(rng):
     """A microwave-sized box (0.5 x 0.4 m, 0.3 m tall) on a table: its top is flat and big
     enough for min_area, but the table is hidden under it and it is low above the table."""
     floor = plane_points(rng, -1.5, 2.5, -1.5, 2.0, 0.0, 60000)
     table = _without(plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000), 0.3, 0.8, 0.2, 0.6)
     box = box_points(rng, (0.55, 0.4, 0.9), (0.5, 0.4, 0.3), 12000)
-    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
+    legs = table_legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
     pts = np.vstack([floor, table, box, legs])
     res = detect_surfaces(pts)
     assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.75]
@@ -294,7 +286,7 @@ def test_small_low_table_with_floor_seen_under_it_is_a_surface(rng):
     shows under it between its legs."""
     floor = plane_points(rng, -1, 1.5, -1, 1.5, 0.0, 40000)
     top = plane_points(rng, 0, 0.45, 0, 0.45, 0.45, 6000)
-    legs = _legs(rng, [(0.03, 0.03), (0.42, 0.03), (0.03, 0.42), (0.42, 0.42)], 0.43)
+    legs = table_legs(rng, [(0.03, 0.03), (0.42, 0.03), (0.03, 0.42), (0.42, 0.42)], 0.43)
     res = detect_surfaces(np.vstack([floor, top, legs]))
     assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.45]
 
@@ -320,7 +312,7 @@ def test_box_top_that_holds_something_stays_a_surface(rng):
     floor = plane_points(rng, -1.5, 2.5, -1.5, 2.0, 0.0, 60000)
     table = _without(plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000), 0.3, 0.8, 0.2, 0.6)
     box = box_points(rng, (0.55, 0.4, 0.9), (0.5, 0.4, 0.3), 12000)
-    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
+    legs = table_legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
     wall = np.c_[rng.uniform(-0.5, 1.7, 15000), np.full(15000, 0.61), rng.uniform(0.75, 2.0, 15000)]
     bare = detect_surfaces(np.vstack([floor, table, box, legs, wall]))
     assert sorted(round(s.height, 2) for s in bare.surfaces) == [0.0, 0.75]
@@ -335,75 +327,12 @@ def test_box_top_with_a_box_on_it_is_no_surface(rng):
     it): two objects, so neither top is a surface; the loaded-top rule is furniture's."""
     floor = plane_points(rng, -1.5, 2.5, -1.5, 2.0, 0.0, 60000)
     table = _without(plane_points(rng, 0, 1.2, 0, 0.8, 0.75, 24000), 0.4, 0.7, 0.25, 0.55)
-    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
+    legs = table_legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], 0.73)
     lower = box_points(rng, (0.55, 0.4, 0.81), (0.3, 0.3, 0.12), 12000)
     upper = box_points(rng, (0.55, 0.4, 0.91), (0.15, 0.12, 0.08), 4000)
     upper = upper[upper[:, 2] > 0.872]  # its bottom face lies on the lower box, hidden
     res = detect_surfaces(np.vstack([floor, table, legs, lower, upper]))
     assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, 0.75]
-
-
-def _flat_object(rng, shape, centre, height, top, density=25000.0):
-    """A thin object lying on a surface at ``top``: a board (0.4 x 0.25 m, turned 10 deg) or
-    a plate (radius 0.12 m), ``height`` thick; its top and rim at ``density`` points/m^2.
-    Returns (points on it, a function telling which (P, 2) xy lie under it)."""
-    if shape == "board":
-        half, turn = np.array([0.2, 0.125]), np.radians(10.0)
-        rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
-
-        def under(xy):
-            return np.all(np.abs((xy - centre) @ rot) <= half, axis=1)
-
-        u = rng.uniform(-1, 1, (int(density * 4 * half.prod()), 2)) * half
-        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * half
-        rim = []
-        for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
-            k = int(density * np.linalg.norm(b - a) * height)
-            rim.append(a + rng.uniform(0, 1, (k, 1)) * (b - a))
-        top_xy, side_xy = u @ rot.T, np.vstack(rim) @ rot.T
-    else:
-        radius = 0.12
-
-        def under(xy):
-            return np.hypot(*(xy - centre).T) <= radius
-
-        r = radius * np.sqrt(rng.uniform(0, 1, int(density * np.pi * radius**2)))
-        a = rng.uniform(0, 2 * np.pi, len(r))
-        top_xy = np.c_[r * np.cos(a), r * np.sin(a)]
-        a = rng.uniform(0, 2 * np.pi, int(density * 2 * np.pi * radius * height))
-        side_xy = radius * np.c_[np.cos(a), np.sin(a)]
-    pts = np.vstack(
-        [
-            np.c_[top_xy + centre, np.full(len(top_xy), top + height)],
-            np.c_[side_xy + centre, rng.uniform(top, top + height, len(side_xy))],
-        ]
-    )
-    return pts, under
-
-
-@pytest.mark.parametrize("shape", ["board", "plate"])
-@pytest.mark.parametrize("top", [0.73, 0.75, 0.765])
-def test_board_or_plate_lying_on_a_table_is_not_part_of_it(rng, shape, top):
-    """A cutting board or a plate, 2 cm high, lies on a table: growth across height layers
-    (within max_step) joins it to the table, but it is a raised plateau, not table."""
-    floor = plane_points(rng, -1, 2.2, -1, 1.8, 0.0, 80000)
-    table = plane_points(rng, 0, 1.2, 0, 0.8, top, 24000)
-    centre = np.array([0.45, 0.4])
-    obj, under = _flat_object(rng, shape, centre, 0.02, top)
-    table = table[~under(table[:, :2])]
-    legs = _legs(rng, [(0.05, 0.05), (1.15, 0.05), (0.05, 0.75), (1.15, 0.75)], top - 0.02)
-    pts = np.vstack([floor, table, obj, legs])
-    on_obj = np.arange(len(floor) + len(table), len(floor) + len(table) + len(obj))
-    on_table = np.arange(len(floor), len(floor) + len(table))
-    res = detect_surfaces(pts)
-    assert sorted(round(s.height, 2) for s in res.surfaces) == [0.0, round(top, 2)]
-    assert res.stats["plateau_voxels"] > 0
-    top_of_obj = on_obj[pts[on_obj, 2] > top + 0.015]
-    assert (res.labels[top_of_obj] >= 0).mean() < 0.02
-    assert (res.labels[on_table] >= 0).mean() > 0.97
-    # Without the plateau test the object's top is table.
-    joined = detect_surfaces(pts, SurfaceParams(plateau_min_step=0.0))
-    assert (joined.labels[top_of_obj] >= 0).mean() > 0.5
 
 
 def test_warped_table_and_table_with_small_dip_stay_whole(rng):
@@ -432,23 +361,3 @@ def test_gentle_ramp_joined_to_a_floor_stays_whole(rng, deg, max_tilt):
     res = detect_surfaces(pts, SurfaceParams(max_tilt_deg=max_tilt))
     assert len(res.surfaces) == 1
     assert (res.labels >= 0).mean() > 0.97
-
-
-@pytest.mark.parametrize("seed", range(12))
-def test_a_plank_on_a_board_leaves_the_board_around_it_on_the_board(seed):
-    """A small shelf unit's foot (a 1 cm plank, a panel on its edge) on a board: the voxels
-    holding the board and the plank's edge fit planes tilted 5-9 deg, and the cluttered
-    voxels beside them once took those planes, leaving the board 5-10 cm away unlabelled
-    (and free to join the objects on it into one)."""
-    rng = np.random.default_rng(seed)
-    board = plane_points(rng, -0.6, 0.6, -0.2, 0.2, 0.8, 60000)
-    cx, cy = 0.01 * seed, 0.01 + 0.01 * (seed % 5)  # across the voxel grid
-    under = (np.abs(board[:, 0] - cx) <= 0.1) & (np.abs(board[:, 1] - cy) <= 0.075)
-    board = board[~under]
-    plank = box_points(rng, (cx, cy, 0.805), (0.2, 0.15, 0.01), 4000)
-    panel = box_points(rng, (cx + 0.095, cy, 0.92), (0.01, 0.15, 0.22), 6000)
-    res = detect_surfaces(np.r_[board, plank, panel], SurfaceParams())
-    assert len(res.surfaces) == 1
-    away = np.maximum(np.abs(board[:, 0] - cx) - 0.1, np.abs(board[:, 1] - cy) - 0.075) > 0.05
-    assert (res.labels[: len(board)][away] == 0).all()
-    assert (res.labels[len(board) + len(plank) :] < 0).mean() > 0.9  # the panel is no board
