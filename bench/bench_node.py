@@ -274,6 +274,7 @@ def _e2e_summary(rate, sent, d, lat, rss, mode) -> dict:
         "detections": c["detections"],
         "detections_reused": c.get("detections_reused", 0),
         "detections_skipped": c.get("detections_skipped", 0),
+        "obstacles_skipped": c.get("obstacles_skipped", 0),
         "surfaces_received": len(lat),
         "latency": _pct(lat) if lat else None,
         f"latency_after_{WARMUP_S:g}s": _pct(steady) if steady else None,
@@ -393,6 +394,7 @@ def _pooled(runs: list[dict]) -> dict:
         "obstacles": _pct(o) if o else None,
         "detected": [r["surfaces_received"] for r in runs],
         "skipped": [r["detections_skipped"] for r in runs],
+        "obstacles_skipped": [r.get("obstacles_skipped", 0) for r in runs],
         "sent": runs[0]["scans_sent"],
     }
 
@@ -433,6 +435,11 @@ def docs_text(st: dict, pooled: dict, noise: float) -> str:
             f">= {int(0.95 * sent)}/{sent}",
         ],
         ["skipped for a newer scan", " ".join(map(str, pooled["skipped"])), "rare"],
+        [
+            "obstacles skipped for a newer scan",
+            " ".join(map(str, pooled["obstacles_skipped"])),
+            "",
+        ],
     ]
     head = f"end to end over sockets, `supportnode run` in its own process, {pooled['runs']} runs"
     if noise > 0:
@@ -609,7 +616,8 @@ def main() -> None:
             path = Path(SOURCE) / "docs" / "performance.md"
             text = docs_text(st, pooled, args.noise)
             cmd = docs_command("bench_node.py", sys.argv[1:])
-            write_docs_block(path, "bench_node", text, cmd, host_load(load0))
+            block = "bench_node_noise" if args.noise > 0 else "bench_node"
+            write_docs_block(path, block, text, cmd, host_load(load0))
             print(f"wrote {path}", file=sys.stderr)
     if "standing" in parts:
         # A robot standing before the scene (one pose of the sequence), a new scan each time:

@@ -71,7 +71,8 @@ def _run_live(args: argparse.Namespace, params) -> int:
         c = node.diagnostics().counters  # refreshes the socket's received / dropped counts
         logging.getLogger("supportnode.node").info(
             "stopped: %d scans received, %d processed, %d dropped, %d rejected; "
-            "%d detections (%d of an unchanged map, reused), %d skipped for a newer scan",
+            "%d detections (%d of an unchanged map, reused), %d skipped for a newer scan, "
+            "%d with their obstacles skipped for a newer scan's surfaces",
             c["scans_received"],
             c["scans_processed"],
             c["scans_dropped"],
@@ -79,6 +80,7 @@ def _run_live(args: argparse.Namespace, params) -> int:
             c["detections"],
             c["detections_reused"],
             c["detections_skipped"],
+            c["obstacles_skipped"],
         )
     return 0
 

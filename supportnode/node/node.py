@@ -11,9 +11,11 @@ Who runs what (`spin`)::
 The receiving thread owns the subscriber, the intake, the gravity estimate and the map; the
 detecting thread owns the trackers and the previous detection (both inside `NodeCore`). The
 only hand-off is the one-job `Mailbox`: a scan merged while the detector is busy replaces the
-waiting one (counted in ``detections_skipped``; the map has every scan). Each side writes its
-own counters; `diagnostics` reads copies. `Node.process` is the same two calls without threads
-or sockets (tests and embedding): its results equal the published ones on the same scans.
+waiting one (counted in ``detections_skipped``; the map has every scan); a detector behind
+the sensor skips a scan's obstacles for a newer scan's surfaces (`supportnode.node.detector`).
+Each side writes its own counters; `diagnostics` reads copies. `Node.process` is the same two
+calls without threads or sockets (tests and embedding): its results equal the published ones
+on the same scans.
 
     with Node(load_config("config/default.yaml")) as node:
         out = node.process(cloud)            # NodeOutput: SupportSurfaces, ObstacleClusters
@@ -40,10 +42,10 @@ from supportnode import bus
 from supportnode._closing import Closing
 from supportnode.errors import InputError, SupportNodeError
 from supportnode.geometry.transform import quaternion_matrix
-from supportnode.kernels import runtime
 from supportnode.msgs import Diagnostics, PointCloud
 from supportnode.node.admission import Admission
-from supportnode.node.core import Job, MapLike, NodeCore, NodeOutput
+from supportnode.node.core import MapLike, NodeCore, NodeOutput
+from supportnode.node.detector import Detector
 from supportnode.node.diagnostics import diagnostics_message
 from supportnode.node.gravity import Gravity
 from supportnode.node.intake import scan_problem
@@ -131,6 +133,7 @@ class Node(Closing):
             "scans_dropped": self._sub.dropped if self._sub is not None else 0,
             "scans_rejected": self._rejects.total,
             "detections_skipped": self._mailbox.skipped,
+            "obstacles_skipped": self._mailbox.obstacles_skipped,
         }
         for part in (self.core.ingest_counters, self.core.detect_counters, self._own):
             c.update(part.copy())  # fixed keys: a copy never meets a resize
@@ -230,7 +233,13 @@ class Node(Closing):
                 on_ready()
             self._ready = True
             self._mailbox = Mailbox()
-            detector = threading.Thread(target=self._detect_loop, name="detect", daemon=True)
+            assert self._outbox is not None
+            detecting = Detector(
+                self.core, self._mailbox, self._outbox, self.latency, self._wire, _POLL_S
+            )
+            detector = threading.Thread(
+                target=detecting.run, args=(self._stop,), name="detect", daemon=True
+            )
             detector.start()
             try:
                 self._receive_loop(duration)
@@ -290,48 +299,21 @@ class Node(Closing):
         if msg is None:
             return
         t_recv = time.perf_counter() - decode  # when decoding began
+        self._mailbox.merging(True)  # a detector done with surfaces may wait for this one
         try:
             job = self.core.ingest(msg)
+            self.latency.add("decode", decode)
+            if job is not None:
+                self.latency.add_all(job.timings)
+                job.timings.clear()  # timed here, once
+                job.t_recv = t_recv
+                self._mailbox.put(job)
         except SupportNodeError as err:
             self._wire.reject("unusable", f"scan seq {msg.seq}: {err}")
-            return
         except Exception as err:
             self._wire.internal_error(f"scan seq {msg.seq}", err)
-            return
-        self.latency.add("decode", decode)
-        if job is None:
-            return
-        self.latency.add_all(job.timings)
-        job.timings.clear()  # timed here, once
-        job.t_recv = t_recv
-        self._mailbox.put(job)
-
-    def _detect_loop(self) -> None:
-        """Detecting thread: take the latest job, detect, publish; until the node stops."""
-        runtime.apply_threads()  # node.threads: numba's count is set per thread
-        while not self._stop.is_set():
-            job = self._mailbox.take(_POLL_S)
-            if job is not None:
-                self._detect_and_publish(job)
-
-    def _detect_and_publish(self, job: Job) -> None:
-        """Surfaces out as soon as they are known, then the obstacles of the same seq."""
-        t = time.perf_counter()
-        assert self._outbox is not None
-        try:
-            part = self.core.detect_surfaces(job)
-            self._outbox.surfaces(part.out, job.t_recv)
-            out = self.core.detect_objects(part)
-        except Exception as err:
-            self._wire.internal_error(f"detection of the scan at {job.stamp:.3f}", err)
-            return
-        out.timings["detect"] = time.perf_counter() - t
-        try:
-            self._outbox.obstacles(out, job.t_recv)
-        except Exception as err:
-            self._wire.internal_error(f"publishing the scan at {job.stamp:.3f}", err)
-        out.timings["total"] = time.perf_counter() - job.t_recv  # receive to results, in node
-        self.latency.add_all(out.timings)
+        finally:
+            self._mailbox.merging(False)
 
     # ------------------------------------------------------------------ diagnostics, map
 

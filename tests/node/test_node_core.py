@@ -131,6 +131,39 @@ def test_mailbox_close_wakes_a_waiting_detector():
     assert got == [None] and time.monotonic() - t < 1.0
 
 
+def test_detector_behind_yields_a_jobs_objects_to_the_newer_job():
+    """A job whose surfaces are out is folded into a newer one waiting (its region joins,
+    counted); with none waiting and no merge under way the detector goes on at once; a merge
+    under way is waited for, and a merge that ends without a job lets it go on."""
+    box = Mailbox()
+    t = time.monotonic()
+    assert not box.yield_to_newer(_job(1.0, [0, 0], [1, 1]), 5.0)
+    assert time.monotonic() - t < 0.5 and box.obstacles_skipped == 0
+    box.put(_job(2.0, [2, -1], [3, 0.5]))
+    assert box.yield_to_newer(_job(1.0, [0, 0], [1, 1]), 5.0) and box.obstacles_skipped == 1
+    job = box.take(0.0)
+    assert job.stamp == 2.0 and box.skipped == 0
+    assert job.region[0].tolist() == [0, -1] and job.region[1].tolist() == [3, 1]
+
+    def merge(then_put: bool) -> None:
+        time.sleep(0.1)
+        if then_put:
+            box.put(_job(3.0, [5, 5], [6, 6]))
+        box.merging(False)
+
+    for then_put in (True, False):
+        box.merging(True)
+        th = threading.Thread(target=merge, args=(then_put,))
+        th.start()
+        t = time.monotonic()
+        assert box.yield_to_newer(_job(2.5, [4, 4], [4.5, 4.5]), 5.0) == then_put
+        assert 0.05 < time.monotonic() - t < 2.0  # waited for the merge, not the timeout
+        th.join(5)
+        if then_put:
+            assert box.take(0.0).region[0].tolist() == [4, 4]
+    assert box.take(0.0) is None and box.obstacles_skipped == 2
+
+
 def test_a_reset_reaches_the_detecting_side_through_the_job(rng):
     """The receiving side resets the map (a source restarted); the detecting side forgets its
     ids when it sees the first job of the new map, also when a job of the old map comes in
