@@ -4,15 +4,18 @@ What a user waits for when they run the command on a file (issue 20: at most 0.5
 the 150,000-point shelf): interpreter start, imports, compiled kernels loaded from the cache,
 reading, detecting, writing ``--out`` and exiting. One untimed run first (it compiles what the
 cache lacks: a fresh checkout takes ~30 s), then ``--runs`` timed ones; also the time of a
-process that only imports what ``detect`` imports. Prints a table and one JSON line (medians,
-s) for bench/ab.py; ``--docs`` writes the table into docs/performance.md.
+process that only imports what ``detect`` imports. ``--baseline REV``: the same detect run by
+turns from a temporary worktree of REV (the issue's "today" was the last revision without
+numba, 435455f). Prints a table and one JSON line (medians, s) for bench/ab.py; ``--docs``
+writes the table into docs/performance.md.
 
-    python bench/bench_startup.py [--runs 5] [--align] [--docs] [CLOUD]
+    python bench/bench_startup.py [--runs 5] [--align] [--baseline REV] [--docs] [CLOUD]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
@@ -20,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -37,11 +41,38 @@ IMPORTS = "import supportnode.cli.detect, supportnode.pipeline, supportnode.io.r
 _ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
-def wall(cmd: list[str]) -> float:
-    """Seconds from starting ``cmd`` to its exit (its output discarded)."""
+def wall(cmd: list[str], source: Path | None = None) -> float:
+    """Seconds from starting ``cmd`` to its exit (its output discarded); source: the tree
+    whose package it runs (on PYTHONPATH and as the working directory), else this one's."""
+    env = dict(_ENV)
+    if source is not None:
+        env["PYTHONPATH"] = str(source)
     t = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_ENV)
+    subprocess.run(
+        cmd,
+        check=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+        cwd=source,
+    )
     return time.perf_counter() - t
+
+
+@contextlib.contextmanager
+def worktree(rev: str | None) -> Iterator[Path | None]:
+    """A temporary git worktree of ``rev`` (removed afterwards); None without a rev."""
+    if rev is None:
+        yield None
+        return
+    with tempfile.TemporaryDirectory(prefix="bench-startup-rev-") as tmp:
+        path = Path(tmp) / "tree"
+        git = ["git", "-C", str(REPO), "worktree"]
+        subprocess.run([*git, "add", "--detach", str(path), rev], check=True, capture_output=True)
+        try:
+            yield path
+        finally:
+            subprocess.run([*git, "remove", "--force", str(path)], check=False)
 
 
 def main() -> int:
@@ -50,15 +81,23 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=5, help="timed runs of each (median)")
     ap.add_argument("--align", action="store_true", help="detect --align (a camera's cloud)")
     ap.add_argument("--docs", action="store_true", help=f"write the table into {DOCS}")
+    ap.add_argument("--baseline", metavar="REV", help="also REV's detect, by turns")
     args = ap.parse_args()
     load = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="bench-startup-") as out:
-        detect = [sys.executable, "-m", "supportnode", "detect", args.cloud, "--out", out]
+    cloud = str(Path(args.cloud).resolve())
+    with (
+        tempfile.TemporaryDirectory(prefix="bench-startup-") as out,
+        worktree(args.baseline) as base,
+    ):
+        detect = [sys.executable, "-m", "supportnode", "detect", cloud, "--out", out]
         detect += ["--align"] if args.align else []
-        wall(detect)  # fills numba's cache when it lacks a kernel, and the bytecode cache
-        times: dict[str, list[float]] = {"detect": [], "imports": []}
-        for _ in range(args.runs):  # by turns: drift falls on both alike
-            times["detect"].append(wall(detect))
+        sides = {"detect": None} | ({f"detect at {args.baseline}": base} if base else {})
+        for source in sides.values():
+            wall(detect, source)  # fills numba's cache when it lacks a kernel, and bytecode's
+        times: dict[str, list[float]] = {k: [] for k in [*sides, "imports"]}
+        for _ in range(args.runs):  # by turns: drift falls on all alike
+            for name, source in sides.items():
+                times[name].append(wall(detect, source))
             times["imports"].append(wall([sys.executable, "-c", IMPORTS]))
     medians = {k: round(statistics.median(v), 4) for k, v in times.items()}
     rows = [[k, medians[k], min(v), max(v)] for k, v in times.items()]
