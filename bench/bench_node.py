@@ -616,7 +616,7 @@ def main() -> None:
             path = Path(SOURCE) / "docs" / "performance.md"
             text = docs_text(st, pooled, args.noise)
             cmd = docs_command("bench_node.py", sys.argv[1:])
-            block = "bench_node_noise" if args.noise > 0 else "bench_node"
+            block = "bench_node.noise" if args.noise > 0 else "bench_node"
             write_docs_block(path, block, text, cmd, host_load(load0))
             print(f"wrote {path}", file=sys.stderr)
     if "standing" in parts:

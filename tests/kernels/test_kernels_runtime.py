@@ -102,11 +102,14 @@ def test_the_thread_budget_reaches_a_worker_thread_that_applies_it():
 
 
 def test_the_nodes_detecting_thread_applies_the_thread_budget(monkeypatch):
-    from supportnode.node import Node
+    import threading
+
+    from supportnode.node.detector import Detector
+    from supportnode.node.mailbox import Mailbox
 
     calls = []
     monkeypatch.setattr(runtime, "apply_threads", lambda: calls.append(1))
-    with Node() as node:
-        node._stop.set()  # the loop ends at once, after its set-up
-        node._detect_loop()
+    stop = threading.Event()
+    stop.set()  # the loop ends at once, after its set-up
+    Detector(None, Mailbox(), None, None, None, 0.01).run(stop)  # only the loop runs
     assert calls == [1]
