@@ -59,6 +59,12 @@ def wall(cmd: list[str], source: Path | None = None) -> float:
     return time.perf_counter() - t
 
 
+def _is_commit(rev: str) -> bool:
+    """Whether ``rev`` names a commit of this repository."""
+    git = ["git", "-C", str(REPO), "rev-parse", "--verify", "--quiet", f"{rev}^{{commit}}"]
+    return subprocess.run(git, capture_output=True).returncode == 0
+
+
 @contextlib.contextmanager
 def worktree(rev: str | None) -> Iterator[Path | None]:
     """A temporary git worktree of ``rev`` (removed afterwards); None without a rev."""
@@ -83,6 +89,12 @@ def main() -> int:
     ap.add_argument("--docs", action="store_true", help=f"write the table into {DOCS}")
     ap.add_argument("--baseline", metavar="REV", help="also REV's detect, by turns")
     args = ap.parse_args()
+    if args.runs < 1:
+        ap.error(f"--runs must be at least 1, got {args.runs}")
+    if not Path(args.cloud).is_file():
+        ap.error(f"{args.cloud}: no such file")
+    if args.baseline is not None and not _is_commit(args.baseline):
+        ap.error(f"--baseline {args.baseline}: not a revision of {REPO}")
     load = os.getloadavg()
     cloud = str(Path(args.cloud).resolve())
     with (

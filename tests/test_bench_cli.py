@@ -86,6 +86,9 @@ def test_ab_bad_arguments_are_one_line_errors(args, message):
         ("bench_locality.py", ["--margin", "nan"], "--margin: expected a finite number >= 0"),
         ("real_accuracy.py", ["--decimate", "0"], "--every and --decimate must be at least 1"),
         ("real_accuracy.py", ["--every", "-1"], "--every and --decimate must be at least 1"),
+        ("bench_startup.py", ["--runs", "0"], "--runs must be at least 1, got 0"),
+        ("bench_startup.py", ["nope.ply"], "nope.ply: no such file"),
+        ("bench_startup.py", ["--baseline", "no-such-rev"], "--baseline no-such-rev: not a"),
     ],
 )
 def test_other_bench_scripts_bad_flags_are_one_line_errors(script, args, message):

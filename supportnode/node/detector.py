@@ -4,9 +4,7 @@ Surfaces go out as soon as they are known, then the obstacles of the same scan. 
 detector falls behind the sensor (a newer scan waits in the mailbox, or is being merged, once
 a scan's surfaces are out), the newer scan's surfaces come first: the older scan's obstacles
 are skipped (``obstacles_skipped``) and its region joins the newer job's, as for a replaced
-job. Never twice in a row, so obstacles lag the surfaces by one scan at most. Measured on the
-moving OS-128 with 1 cm noise (detection ~85 ms of a 100 ms period): surfaces p99 172 -> 118
-ms, obstacles p99 224 -> 162 ms (docs/performance.md)."""
+job. Never twice in a row, so obstacles lag the surfaces by one scan at most (docs/node.md)."""
 
 from __future__ import annotations
 
