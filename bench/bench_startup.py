@@ -4,7 +4,8 @@ What a user waits for when they run the command on a file (issue 20: at most 0.5
 the 150,000-point shelf): interpreter start, imports, compiled kernels loaded from the cache,
 reading, detecting, writing ``--out`` and exiting. One untimed run first (it compiles what the
 cache lacks: a fresh checkout takes ~30 s), then ``--runs`` timed ones; also the time of a
-process that only imports what ``detect`` imports. ``--baseline REV``: the same detect run by
+process that only imports what ``detect`` imports, and of one with numba alone (import it,
+call one trivial kernel from the cache: numba's floor in a one-shot process). ``--baseline REV``: the same detect run by
 turns from a temporary worktree of REV (the issue's "today" was the last revision without
 numba, 435455f). Prints a table and one JSON line (medians, s) for bench/ab.py; ``--docs``
 writes the table into docs/performance.md.
@@ -33,12 +34,24 @@ REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / "docs" / "performance.md"
 SHELF = REPO / "sim_scans" / "shelf_sampled.ply"
 IMPORTS = "import supportnode.cli.detect, supportnode.pipeline, supportnode.io.results"
+# numba's own floor in a one-shot process: import it and call one trivial kernel loaded from
+# the cache (its first call loads numba's registries, which import scipy.linalg).
+FLOOR_KERNEL = """import numba, numpy
+
+@numba.njit(cache=True)
+def total(a):
+    return a.sum()
+"""
+FLOOR = "import numpy, floor_kernel; floor_kernel.total(numpy.ones(3))"
 
 
 # A user's Python caches the modules' bytecode; a developer's shell may forbid it
 # (PYTHONDONTWRITEBYTECODE, set in some containers): every import would then compile the
 # package's ~200 modules again (~0.1 s). The processes measured run as the user's would.
 _ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
+_FLOOR_ROW = "numba alone"
 
 
 def wall(cmd: list[str], source: Path | None = None) -> float:
@@ -104,13 +117,18 @@ def main() -> int:
         detect = [sys.executable, "-m", "supportnode", "detect", cloud, "--out", out]
         detect += ["--align"] if args.align else []
         sides = {"detect": None} | ({f"detect at {args.baseline}": base} if base else {})
-        for source in sides.values():
-            wall(detect, source)  # fills numba's cache when it lacks a kernel, and bytecode's
-        times: dict[str, list[float]] = {k: [] for k in [*sides, "imports"]}
+        floor = Path(out) / "floor"
+        floor.mkdir()
+        (floor / "floor_kernel.py").write_text(FLOOR_KERNEL)
+        for source in [*sides.values(), floor]:
+            # fills numba's cache when it lacks a kernel, and bytecode's
+            wall(detect if source is not floor else [sys.executable, "-c", FLOOR], source)
+        times: dict[str, list[float]] = {k: [] for k in [*sides, "imports", _FLOOR_ROW]}
         for _ in range(args.runs):  # by turns: drift falls on all alike
             for name, source in sides.items():
                 times[name].append(wall(detect, source))
             times["imports"].append(wall([sys.executable, "-c", IMPORTS]))
+            times[_FLOOR_ROW].append(wall([sys.executable, "-c", FLOOR], floor))
     medians = {k: round(statistics.median(v), 4) for k, v in times.items()}
     rows = [[k, medians[k], min(v), max(v)] for k, v in times.items()]
     what = f"fresh processes on {Path(args.cloud).name}{' --align' if args.align else ''}"
