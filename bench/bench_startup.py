@@ -8,9 +8,12 @@ process that only imports what ``detect`` imports, and of one with numba alone (
 call one trivial kernel from the cache: numba's floor in a one-shot process). ``--baseline REV``: the same detect run by
 turns from a temporary worktree of REV (the issue's "today" was the last revision without
 numba, 435455f). Prints a table and one JSON line (medians, s) for bench/ab.py; ``--docs``
-writes the table into docs/performance.md.
+writes the table into docs/performance.md. ``--cold N``: also N runs on an empty numba cache
+(an install's first run), the kernels compiled in child processes or, as before, in the
+detect process itself (``SUPPORTNODE_PRECOMPILE=0``), by turns.
 
-    python bench/bench_startup.py [--runs 5] [--align] [--baseline REV] [--docs] [CLOUD]
+    python bench/bench_startup.py [--runs 5] [--align] [--baseline REV] [--cold N] [--docs]
+                                  [CLOUD]
 """
 
 from __future__ import annotations
@@ -54,10 +57,11 @@ _ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 _FLOOR_ROW = "numba alone"
 
 
-def wall(cmd: list[str], source: Path | None = None) -> float:
+def wall(cmd: list[str], source: Path | None = None, **extra: str) -> float:
     """Seconds from starting ``cmd`` to its exit (its output discarded); source: the tree
-    whose package it runs (on PYTHONPATH and as the working directory), else this one's."""
-    env = dict(_ENV)
+    whose package it runs (on PYTHONPATH and as the working directory), else this one's;
+    extra: environment variables set for it."""
+    env = dict(_ENV, **extra)
     if source is not None:
         env["PYTHONPATH"] = str(source)
     t = time.perf_counter()
@@ -70,6 +74,28 @@ def wall(cmd: list[str], source: Path | None = None) -> float:
         cwd=source,
     )
     return time.perf_counter() - t
+
+
+_COLD_ROWS = {
+    "detect, kernels compiled in child processes": "1",
+    "detect, compiled in its own process": "0",  # SUPPORTNODE_PRECOMPILE=0, as before
+}
+
+
+def cold(detect: list[str], runs: int) -> str:
+    """A table of ``detect`` on an empty numba cache (an install's first run), with and
+    without the child processes that compile the kernels, by turns."""
+    times: dict[str, list[float]] = {k: [] for k in _COLD_ROWS}
+    for _ in range(runs):
+        for name, switch in _COLD_ROWS.items():
+            with tempfile.TemporaryDirectory(prefix="bench-startup-cache-") as cache:
+                times[name].append(
+                    wall(detect, NUMBA_CACHE_DIR=cache, SUPPORTNODE_PRECOMPILE=switch)
+                )
+    rows = [[k, round(statistics.median(v), 2), min(v), max(v)] for k, v in times.items()]
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    head = f"numba's cache empty (an install's first run), {runs} runs, {cores} cores\n\n"
+    return head + table(rows, ["process", "median s", "min s", "max s"])
 
 
 def _is_commit(rev: str) -> bool:
@@ -101,9 +127,12 @@ def main() -> int:
     ap.add_argument("--align", action="store_true", help="detect --align (a camera's cloud)")
     ap.add_argument("--docs", action="store_true", help=f"write the table into {DOCS}")
     ap.add_argument("--baseline", metavar="REV", help="also REV's detect, by turns")
+    ap.add_argument("--cold", type=int, default=0, metavar="N", help="N runs on an empty cache")
     args = ap.parse_args()
     if args.runs < 1:
         ap.error(f"--runs must be at least 1, got {args.runs}")
+    if args.cold < 0:
+        ap.error(f"--cold must be at least 0, got {args.cold}")
     if not Path(args.cloud).is_file():
         ap.error(f"{args.cloud}: no such file")
     if args.baseline is not None and not _is_commit(args.baseline):
@@ -129,18 +158,25 @@ def main() -> int:
                 times[name].append(wall(detect, source))
             times["imports"].append(wall([sys.executable, "-c", IMPORTS]))
             times[_FLOOR_ROW].append(wall([sys.executable, "-c", FLOOR], floor))
-    medians = {k: round(statistics.median(v), 4) for k, v in times.items()}
-    rows = [[k, medians[k], min(v), max(v)] for k, v in times.items()]
-    what = f"fresh processes on {Path(args.cloud).name}{' --align' if args.align else ''}"
-    text = f"{what}, {args.runs} runs, warm cache\n\n" + table(
-        rows, ["process", "median s", "min s", "max s"]
-    )
+        text = warm_table(times, args)
+        if args.cold:
+            text += "\n\n" + cold(detect, args.cold)
     print(text)
-    print(json.dumps({"startup": medians}))
+    print(json.dumps({"startup": {k: round(statistics.median(v), 4) for k, v in times.items()}}))
     if args.docs:
         command = docs_command("bench_startup.py", sys.argv[1:])
         write_docs_block(DOCS, "bench_startup", text, command, host_load(load))
     return 0
+
+
+def warm_table(times: dict[str, list[float]], args: argparse.Namespace) -> str:
+    """The warm runs' table: median, min and max of each process, seconds."""
+    medians = {k: round(statistics.median(v), 4) for k, v in times.items()}
+    rows = [[k, medians[k], min(v), max(v)] for k, v in times.items()]
+    what = f"fresh processes on {Path(args.cloud).name}{' --align' if args.align else ''}"
+    return f"{what}, {args.runs} runs, warm cache\n\n" + table(
+        rows, ["process", "median s", "min s", "max s"]
+    )
 
 
 if __name__ == "__main__":

@@ -12,7 +12,8 @@ Conventions:
   side merges the next scan while the detecting side labels this one).
 - A module that adds kernels registers a small warm-up with :func:`runtime.warmer`; the node
   calls :func:`runtime.warm` before it subscribes, then rehearses one detection
-  (`supportnode.node.rehearsal`), so its first scan is not slow.
+  (`supportnode.node.rehearsal`), so its first scan is not slow. On an empty cache the first
+  `runtime.warm` compiles every kernel module in child processes first (`precompile`).
 - A kernel that replaces numpy code gives the same bits: the same operations in the same order
   (numpy's pairwise sums reproduced; its arccos and cos kept, its SIMD versions rounding
   differently from the C library's), and the numpy version stays as the tests' reference.

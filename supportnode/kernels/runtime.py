@@ -15,6 +15,7 @@ _LOCK = threading.Lock()
 _WARMED: set[Callable[[], None]] = set()  # warm-ups already run in this process
 _configured = False
 _threads: int | None = None  # the budget configure() was given (None: all cores)
+_precompile_tried = False  # whether warm() looked for a fresh install's empty cache yet
 
 
 def warmer(fn: Callable[[], None]) -> Callable[[], None]:
@@ -110,15 +111,41 @@ def warm(modules: Iterable[str] | None = None) -> float:
     modules: kernel module names (``"downsample"``, ...) to import first; None: only those
     already imported, i.e. the kernels the caller's code paths use (each user imports its
     kernel module when it is imported itself). Loading every kernel module would pay for
-    kernels nobody calls (~1 s of a short ``supportnode detect``)."""
+    kernels nobody calls (~1 s of a short ``supportnode detect``). On a fresh install's empty
+    cache, the first call compiles every kernel module in child processes on the usable
+    cores first (`precompile.compile_cold`; at most the configured thread budget)."""
+    global _precompile_tried
     t = time.perf_counter()
     configure()
     package = __package__ or "supportnode.kernels"
     for name in modules or ():
         importlib.import_module(f"{package}.{name}")
     with _LOCK:
-        todo = [fn for fn in _WARMERS if fn not in _WARMED]
+        first, _precompile_tried = not _precompile_tried, True
+    if first:
+        from supportnode.kernels import precompile
+
+        precompile.compile_cold(_threads)
+    _run_warmers(None)
+    return time.perf_counter() - t
+
+
+def warm_only(modules: Iterable[str]) -> None:
+    """Run the warm-ups of the named kernel modules (imported) only, not of the kernel modules
+    they import: a compiling child's share (`precompile`)."""
+    package = __package__ or "supportnode.kernels"
+    _run_warmers({f"{package}.{name}" for name in modules})
+
+
+def _run_warmers(modules: set[str] | None) -> None:
+    """Run the registered warm-ups not run yet in this process (of ``modules`` only, full
+    names, when given)."""
+    with _LOCK:
+        todo = [
+            fn
+            for fn in _WARMERS
+            if fn not in _WARMED and (modules is None or fn.__module__ in modules)
+        ]
         _WARMED.update(todo)
     for fn in todo:
         fn()
-    return time.perf_counter() - t

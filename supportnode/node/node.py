@@ -253,8 +253,11 @@ class Node(Closing):
                 signal.signal(sig, old)
 
     def _warm(self) -> None:
-        """Compile (a fresh install: ~40 s on two cores) or load the kernels, saying so."""
-        self.log.info("%s: preparing kernels (first run after an install: ~40 s)", self.cfg.name)
+        """Compile (a fresh install: ~20 s on two cores) or load the kernels, saying so."""
+        self.log.info(
+            "%s: preparing kernels (the first run after an install compiles them: ~20 s on two cores)",
+            self.cfg.name,
+        )
         took = warm_up(self.params, self.cfg.threads or None)
         self.log.info("%s: kernels ready in %.2f s", self.cfg.name, took)
 
