@@ -1,8 +1,12 @@
 """Object segmentation at the report's sizes: Algorithm 2 (knn), voxels and the convex default.
 
-Run: python bench/bench_objects.py [--repeats 5]
+Run: python bench/bench_objects.py [--repeats 5] [--docs]
 Prints median seconds per method next to the report's times (AMD Ryzen 5 3600, Python 3.8), on
-mesh-sampled simulator clouds whose surfaces come from the planar detector (timed apart), then
+mesh-sampled simulator clouds whose surfaces come from the planar detector (timed apart), and,
+where ``open3d`` is installed (the ``bench`` extra), Open3D's ``cluster_dbscan`` on the same
+candidates (the points on no surface; eps the voxel method's cell, 3 cm, 10 points) with the
+default (convex) time as a ratio of it; ``--docs`` writes that table into
+docs/performance.md. Then
 how many ground-truth touching groups each setting separates, in those clouds and in Kinect
 views of the same scenes (the convex method segments only what is sampled densely enough
 to show faces: a depth camera's view), then the default detection on tabletop views where
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 from pathlib import Path
 
@@ -21,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import median_time, sampled_scene, table
+from common import docs_command, host_load, median_time, sampled_scene, table, write_docs_block
 
 from supportnode.geometry.objects import detect_objects
 from supportnode.geometry.surfaces import detect_surfaces
@@ -46,6 +51,21 @@ CASES = [
 ]
 
 
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "performance.md"
+
+
+def open3d_dbscan(pts: np.ndarray, repeats: int) -> float | None:
+    """Median seconds of Open3D's ``cluster_dbscan`` on ``pts`` (eps the voxel method's
+    cell), None without open3d."""
+    try:
+        import open3d as o3d
+    except ImportError:
+        return None
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+    eps = ObjectParams().cluster_cell
+    return median_time(lambda: cloud.cluster_dbscan(eps=eps, min_points=10), repeats)
+
+
 def timings(repeats: int) -> str:
     rows = []
     for label, scene, n, k, report in CASES:
@@ -59,9 +79,12 @@ def timings(repeats: int) -> str:
         t_vox = median_time(lambda p=vox, x=pts, s=surf: detect_objects(x, s, p), repeats)
         t_vns = median_time(lambda p=vox_nosplit, x=pts, s=surf: detect_objects(x, s, p), repeats)
         t_cvx = median_time(lambda p=convex, x=pts, s=surf: detect_objects(x, s, p), repeats)
-        cand = int((surf.labels == -1).sum())
+        cand = surf.labels == -1
         speed_up = f"{report / t_cvx:.0f}x"
-        rows.append([label, n, cand, k, report, t_knn, t_vox, t_vns, t_cvx, speed_up])
+        t_o3d = open3d_dbscan(pts[cand], repeats)
+        peer = ["-", "-"] if t_o3d is None else [t_o3d, f"{t_cvx / t_o3d:.2f}"]
+        row = [label, n, int(cand.sum()), k, report, t_knn, t_vox, t_vns, t_cvx, speed_up]
+        rows.append(row + peer)
     return table(
         rows,
         [
@@ -75,6 +98,8 @@ def timings(repeats: int) -> str:
             "voxel no-split s",
             "convex s",
             "speed-up",
+            "o3d dbscan s",
+            "convex/o3d",
         ],
     )
 
@@ -175,8 +200,16 @@ def _majority(lab: np.ndarray) -> int:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--docs", action="store_true", help=f"write the timings into {DOCS}")
     args = parser.parse_args()
-    print(timings(args.repeats))
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1, got {args.repeats}")
+    load = os.getloadavg()
+    text = timings(args.repeats)
+    print(text)
+    if args.docs:
+        command = docs_command("bench_objects.py", sys.argv[1:])
+        write_docs_block(DOCS, "bench_objects", text, command, host_load(load))
     print()
     rows = []
     clouds = [

@@ -90,6 +90,7 @@ def test_ab_bad_arguments_are_one_line_errors(args, message):
         ("bench_startup.py", ["nope.ply"], "nope.ply: no such file"),
         ("bench_startup.py", ["--baseline", "no-such-rev"], "--baseline no-such-rev: not a"),
         ("bench_startup.py", ["--cold", "-1"], "--cold must be at least 0, got -1"),
+        ("bench_objects.py", ["--repeats", "0"], "--repeats must be at least 1, got 0"),
     ],
 )
 def test_other_bench_scripts_bad_flags_are_one_line_errors(script, args, message):

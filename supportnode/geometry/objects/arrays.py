@@ -27,3 +27,12 @@ def _cells_xy(
         v = (v - lo[a]) / cell
         out.append((np.floor(v) if floor else v).astype(np.int64))
     return out[0], out[1]
+
+
+def ranks(values: np.ndarray, n: int) -> np.ndarray:
+    """Each of ``values`` (K,) ints in [0, n) as its rank among the distinct values, (K,)
+    int64: ``np.unique(values, return_inverse=True)[1]``, the same values, by a table of the
+    values present (O(K + n)) instead of a sort of all K."""
+    present = np.zeros(n, bool)
+    present[values] = True
+    return (np.cumsum(present) - 1)[values]

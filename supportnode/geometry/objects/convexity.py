@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from supportnode.geometry.linalg import distances, sym3_eigen_entries
+from supportnode.geometry.objects.arrays import ranks
 from supportnode.geometry.objects.bridges import split_bridges, split_necks
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.faces import (
@@ -225,7 +226,8 @@ def cluster_convex(
     if not dense.any():
         return comp  # its labels 0..C-1 are all used
     out = np.where(dense_point, -1, comp)
-    _, out[out >= 0] = np.unique(out[out >= 0], return_inverse=True)
+    kept = out >= 0
+    out[kept] = ranks(out[kept], len(dense))
     window = _windows(level, noise, params)
     free = dense_point & (above > band)
     stats["band_points"] = int((dense_point & ~free).sum())
@@ -255,8 +257,7 @@ def cluster_convex(
     none = dense & (np.bincount(comp, weights=out >= 0, minlength=len(dense)) == 0)
     if none.any():
         lost = free & none[comp]
-        _, inv = np.unique(comp[lost], return_inverse=True)
-        out[lost] = base + inv.reshape(-1)
+        out[lost] = base + ranks(comp[lost], len(dense))
     return out
 
 
