@@ -32,7 +32,7 @@ from supportnode.geometry.objects.stacks import cut_stacks
 from supportnode.geometry.objects.votes import CONCAVE_SHARE, absorb_small, vote_segments
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.components import label_edges
-from supportnode.kernels.groups import label_boxes
+from supportnode.kernels.groups import label_boxes, rows_by_key
 from supportnode.params import ObjectParams
 
 _MIN_PER_CELL = 3  # median points per occupied cell
@@ -320,8 +320,9 @@ def _noise(comp: np.ndarray, level: np.ndarray, sigma: np.ndarray) -> np.ndarray
     dense = np.flatnonzero(level < len(CELL_STEPS))
     if len(dense) == 0:
         return noise
-    order = np.argsort(comp, kind="stable")
-    bounds = np.searchsorted(comp[order], np.arange(len(level) + 1))
+    # Rows by component in row order (a stable argsort's), by a counting sort.
+    n = len(level)
+    order, bounds = rows_by_key(comp, np.arange(n + 1), n)
     for k in dense:
         mine = order[bounds[k] : bounds[k + 1]]
         noise[k] = np.median(sigma[mine[:: max(1, len(mine) // 200)]])
