@@ -100,11 +100,12 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
     t0 = time.perf_counter()
     stages = 3 + bool(args.render)
     with progress(f"detect {args.cloud}", stages, "stages", args.quiet) as bar:
-        bar.advance(0, "reading")
         # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart,
         # so that the stage timings are the work on this cloud.
+        bar.advance(0, "loading the kernels (the first run after an install compiles them)")
         with long_lived():
             kernels_time = runtime.warm()
+        bar.advance(0, "reading")
         runtime.keep_freed_memory()  # this process's: the stages reuse freed pages
         t = time.perf_counter()
         cloud, unit, guess = _read(args.cloud, args.units)
