@@ -36,6 +36,7 @@ _NOT_KERNELS = frozenset({"runtime", "precompile"})
 _SWITCH = "SUPPORTNODE_PRECOMPILE"  # "0": never; set to "0" in the children (no grandchildren)
 _MAX_WORKERS = 8  # each child holds numba and LLVM (~250 MB while compiling)
 _MIN_COLD = 8  # fewer cold kernels than this compile faster in the process than in children
+_DEADLINE_S = 900.0  # a child still compiling then is killed (all of them take ~40 s of CPU)
 
 log = logging.getLogger("supportnode.kernels")
 
@@ -131,6 +132,11 @@ def compile_cold(workers: int | None = None) -> int:
     return n
 
 
+def _command() -> list[str]:
+    """A compiling child's command line."""
+    return [sys.executable, "-m", __name__]
+
+
 def _child(todo: queue.SimpleQueue[str]) -> None:
     """Feed modules from ``todo`` to one child, one at a time, until none are left; a child
     that fails is logged, never raised (the caller compiles what is still missing)."""
@@ -138,7 +144,7 @@ def _child(todo: queue.SimpleQueue[str]) -> None:
     with tempfile.TemporaryFile("w+") as err:  # a file: a chatty child never blocks on it
         try:
             child = subprocess.Popen(
-                [sys.executable, "-m", __name__],
+                _command(),
                 env=env,
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
@@ -149,6 +155,10 @@ def _child(todo: queue.SimpleQueue[str]) -> None:
             log.warning("cannot start a child to compile kernels: %s", exc)
             return
         assert child.stdin is not None and child.stdout is not None
+        # A child that hangs is killed: its stdout then ends, and the caller goes on.
+        deadline = threading.Timer(_DEADLINE_S, child.kill)
+        deadline.daemon = True
+        deadline.start()
         try:
             while True:
                 try:
@@ -163,6 +173,7 @@ def _child(todo: queue.SimpleQueue[str]) -> None:
         except OSError:  # its stdin closed: it ended
             pass
         child.wait()
+        deadline.cancel()
         if child.returncode != 0:
             err.seek(0)
             last = err.read().strip().splitlines()[-1:] or ["no message"]

@@ -4,6 +4,7 @@ import logging
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from supportnode.kernels import precompile, runtime
@@ -101,6 +102,20 @@ def test_a_failing_child_is_one_warning_and_the_caller_goes_on(monkeypatch, tmp_
         "a child compiling kernels failed (exit 2): precompile: no kernel module"
         " 'no_such_kernels'; the rest compile here"
     ]
+
+
+def test_a_hanging_child_is_killed_at_the_deadline(monkeypatch, caplog):
+    monkeypatch.setattr(precompile, "_DEADLINE_S", 0.5)
+    monkeypatch.setattr(precompile, "kernel_modules", lambda: ["rects", "offsets"])
+    monkeypatch.setattr(precompile, "cold_kernels", lambda names: {"knn": 9, "rects": 1})
+    hang = [sys.executable, "-c", "import time; time.sleep(60)"]
+    monkeypatch.setattr(precompile, "_command", lambda: hang)
+    t = time.monotonic()
+    with caplog.at_level(logging.WARNING, logger="supportnode.kernels"):
+        assert precompile.compile_cold(workers=2) == 2
+    assert time.monotonic() - t < 30
+    killed = "a child compiling kernels failed (exit -9): no message; the rest compile here"
+    assert [r.getMessage() for r in caplog.records] == [killed, killed]
 
 
 def test_warm_looks_for_a_cold_cache_once_per_process(monkeypatch):
