@@ -102,7 +102,7 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
     with progress(f"detect {args.cloud}", stages, "stages", args.quiet) as bar:
         # Compiled kernels load once per process (~0.5-1 s, mostly numba starting up): apart,
         # so that the stage timings are the work on this cloud.
-        bar.advance(0, "loading the kernels (the first run after an install compiles them)")
+        bar.advance(0, "compiling kernels (once per install)")  # shown only when slow
         with long_lived():
             kernels_time = runtime.warm()
         bar.advance(0, "reading")
