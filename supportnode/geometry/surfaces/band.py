@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from supportnode.geometry.linalg import distances, sym3_eigen_entries
+from supportnode.geometry.surfaces.groups import columns_per_group
 from supportnode.geometry.surfaces.noise import NoiseModel, fit_sample
 from supportnode.geometry.surfaces.planar import (
     _label_by_plane_of,
@@ -366,11 +367,7 @@ def band_decides(
         count = np.bincount(comp, minlength=n_comp).astype(np.float64)
     else:
         count = counted[0].astype(np.float64)
-    sv = np.flatnonzero(surface_of_voxel >= 0)
-    cols = np.unique(
-        np.stack([surface_of_voxel[sv], grid.keys[sv, 0], grid.keys[sv, 1]], 1), axis=0
-    )
-    area = np.bincount(cols[:, 0], minlength=n_comp) * grid.size[0] * grid.size[1]
+    area = columns_per_group(surface_of_voxel, grid.keys, n_comp) * grid.size[0] * grid.size[1]
     spacing = np.sqrt(area / np.maximum(count, 1.0))
     # Each component's median range, from its voxels weighted by their labelled points.
     r_med = np.zeros(n_comp)
