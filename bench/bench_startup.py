@@ -3,14 +3,14 @@
 What a user waits for when they run the command on a file (issue 20: at most 0.55-0.72 s on
 the 150,000-point shelf): interpreter start, imports, compiled kernels loaded from the cache,
 reading, detecting, writing ``--out`` and exiting. One untimed run first (it compiles what the
-cache lacks: a fresh checkout takes ~30 s), then ``--runs`` timed ones; also the time of a
-process that only imports what ``detect`` imports, and of one with numba alone (import it,
-call one trivial kernel from the cache: numba's floor in a one-shot process). ``--baseline REV``: the same detect run by
-turns from a temporary worktree of REV (the issue's "today" was the last revision without
-numba, 435455f). Prints a table and one JSON line (medians, s) for bench/ab.py; ``--docs``
-writes the table into docs/performance.md. ``--cold N``: also N runs on an empty numba cache
-(an install's first run), the kernels compiled in child processes or, as before, in the
-detect process itself (``SUPPORTNODE_PRECOMPILE=0``), by turns.
+cache lacks), then ``--runs`` timed ones; also the time of a process that only imports what
+``detect`` imports, and of one with numba alone (import it, call one trivial kernel from the
+cache: numba's floor in a one-shot process). ``--baseline REV``: the same detect run by turns
+from a temporary worktree of REV (the issue's "today" was the last revision without numba,
+435455f). ``--cold N``: also N runs on an empty numba cache (an install's first run), the
+kernels compiled in child processes or, as before, in the detect process itself
+(``SUPPORTNODE_PRECOMPILE=0``), by turns. Prints the tables and one JSON line (medians, s)
+for bench/ab.py; ``--docs`` writes the tables into docs/performance.md.
 
     python bench/bench_startup.py [--runs 5] [--align] [--baseline REV] [--cold N] [--docs]
                                   [CLOUD]
@@ -82,17 +82,20 @@ _COLD_ROWS = {
 }
 
 
-def cold(detect: list[str], runs: int) -> str:
+def cold(detect: list[str], runs: int, times: dict[str, list[float]]) -> str:
     """A table of ``detect`` on an empty numba cache (an install's first run), with and
-    without the child processes that compile the kernels, by turns."""
-    times: dict[str, list[float]] = {k: [] for k in _COLD_ROWS}
+    without the child processes that compile the kernels, by turns; each run's seconds are
+    added to ``times`` under its row's name."""
+    times.update({k: [] for k in _COLD_ROWS})
     for _ in range(runs):
         for name, switch in _COLD_ROWS.items():
             with tempfile.TemporaryDirectory(prefix="bench-startup-cache-") as cache:
                 times[name].append(
                     wall(detect, NUMBA_CACHE_DIR=cache, SUPPORTNODE_PRECOMPILE=switch)
                 )
-    rows = [[k, round(statistics.median(v), 2), min(v), max(v)] for k, v in times.items()]
+    rows = [
+        [k, round(statistics.median(times[k]), 2), min(times[k]), max(times[k])] for k in _COLD_ROWS
+    ]
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     head = f"numba's cache empty (an install's first run), {runs} runs, {cores} cores\n\n"
     return head + table(rows, ["process", "median s", "min s", "max s"])
@@ -160,7 +163,7 @@ def main() -> int:
             times[_FLOOR_ROW].append(wall([sys.executable, "-c", FLOOR], floor))
         text = warm_table(times, args)
         if args.cold:
-            text += "\n\n" + cold(detect, args.cold)
+            text += "\n\n" + cold(detect, args.cold, times)
     print(text)
     print(json.dumps({"startup": {k: round(statistics.median(v), 4) for k, v in times.items()}}))
     if args.docs:
