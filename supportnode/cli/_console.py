@@ -26,6 +26,8 @@ _PIPE_WIDTH = 160
 _PLAIN_EVERY_S = 5.0
 # Jobs shorter than this print no progress lines (they are done before anyone waits), s.
 _PLAIN_AFTER_S = 1.0
+# In a pipe, a job with no line yet after this long prints one saying what it waits for.
+_PLAIN_WAITING_S = 2.0
 
 
 class Interrupted(KeyboardInterrupt):
@@ -124,6 +126,11 @@ class Progress:
             self._timer.start()
         else:
             self._mode = "plain"
+            # A long first stage (a fresh install's kernels compiling) says what it waits for
+            # once, rather than nothing until it ends.
+            self._timer = threading.Timer(_PLAIN_WAITING_S, self._plain_waiting)
+            self._timer.daemon = True
+            self._timer.start()
 
     def _start_bar(self) -> None:
         from rich import progress as rp
@@ -151,23 +158,26 @@ class Progress:
         )
 
     def advance(self, n: float = 1.0, note: str | None = None) -> None:
-        if self._mode == "bar":
-            with self._lock:
-                self.done += n
-                self._note = note
-                if self._bar is not None:
-                    self._bar.update(self._task, advance=n, description=note or self.what)
-            return
-        self.done += n
-        if self._mode == "plain":
-            self._plain(note)
+        with self._lock:
+            self.done += n
+            self._note = note
+            if self._mode == "bar" and self._bar is not None:
+                self._bar.update(self._task, advance=n, description=note or self.what)
+            elif self._mode == "plain":
+                self._plain(note)
 
-    def _plain(self, note: str | None) -> None:
+    def _plain_waiting(self) -> None:
+        """The timer's line in a pipe: the job and its note, unless a line came already."""
+        with self._lock:
+            if self._mode == "plain" and self._last_line == self._t0:
+                self._plain(self._note, force=True)
+
+    def _plain(self, note: str | None, force: bool = False) -> None:
         now = time.monotonic()
         share = self.done / self.total if self.total else 0.0
-        if now - self._t0 < _PLAIN_AFTER_S:
+        if now - self._t0 < _PLAIN_AFTER_S and not force:
             return
-        if now - self._last_line < _PLAIN_EVERY_S and share - self._last_share < 0.1:
+        if now - self._last_line < _PLAIN_EVERY_S and share - self._last_share < 0.1 and not force:
             return
         self._last_line, self._last_share = now, share
         elapsed = now - self._t0

@@ -127,6 +127,26 @@ def test_progress_lines_in_pipes_and_quiet(monkeypatch, capsys) -> None:
     assert capsys.readouterr().err == ""
 
 
+def test_a_long_first_stage_in_a_pipe_says_what_it_waits_for(monkeypatch, capsys) -> None:
+    monkeypatch.setattr(_console, "_PLAIN_WAITING_S", 0.05)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False)
+    with _console.progress("detect x.ply", 3, "stages") as bar:
+        bar.advance(0, "compiling kernels (once per install)")
+        assert bar._timer is not None
+        bar._timer.join(timeout=10)
+        bar.advance(3)  # done within a second: no more lines
+    assert capsys.readouterr().err.splitlines() == [
+        "detect x.ply: 0/3 stages, 0 s (compiling kernels (once per install))"
+    ]
+    monkeypatch.setattr(_console, "_PLAIN_AFTER_S", 0.0)
+    with _console.progress("detect x.ply", 3, "stages") as bar:
+        bar.advance(1, "reading")  # a line already: the timer adds none
+        bar._timer.join(timeout=10)
+    assert capsys.readouterr().err.splitlines() == [
+        "detect x.ply: 1/3 stages, 0 s, about 0 s left (reading)"
+    ]
+
+
 def test_progress_bar_on_a_terminal(monkeypatch) -> None:
     import io
 
