@@ -5,8 +5,8 @@ Prints median seconds per method next to the report's times (AMD Ryzen 5 3600, P
 mesh-sampled simulator clouds whose surfaces come from the planar detector (timed apart), and,
 where ``open3d`` is installed (the ``bench`` extra), Open3D's ``cluster_dbscan`` on the same
 candidates (the points on no surface; eps the voxel method's cell, 3 cm, 10 points) with the
-default (convex) time as a ratio of it; ``--docs`` writes that table into
-docs/performance.md. Then
+default (convex) time as a ratio of it, and one JSON line of the medians for bench/ab.py;
+``--docs`` writes that table into docs/performance.md. Then
 how many ground-truth touching groups each setting separates, in those clouds and in Kinect
 views of the same scenes (the convex method segments only what is sampled densely enough
 to show faces: a depth camera's view), then the default detection on tabletop views where
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import sys
 from pathlib import Path
@@ -66,8 +67,9 @@ def open3d_dbscan(pts: np.ndarray, repeats: int) -> float | None:
     return median_time(lambda: cloud.cluster_dbscan(eps=eps, min_points=10), repeats)
 
 
-def timings(repeats: int) -> str:
-    rows = []
+def timings(repeats: int) -> tuple[str, dict]:
+    """The timings table and its medians by scene, seconds (for bench/ab.py)."""
+    rows, medians = [], {}
     for label, scene, n, k, report in CASES:
         pts = sampled_scene(scene, n).points.astype(np.float64)
         surf = detect_surfaces(pts, SurfaceParams())
@@ -85,6 +87,7 @@ def timings(repeats: int) -> str:
         peer = ["-", "-"] if t_o3d is None else [t_o3d, f"{t_cvx / t_o3d:.2f}"]
         row = [label, n, int(cand.sum()), k, report, t_knn, t_vox, t_vns, t_cvx, speed_up]
         rows.append(row + peer)
+        medians[scene] = {"knn_s": t_knn, "voxel_s": t_vox, "convex_s": t_cvx}
     return table(
         rows,
         [
@@ -101,7 +104,7 @@ def timings(repeats: int) -> str:
             "o3d dbscan s",
             "convex/o3d",
         ],
-    )
+    ), medians
 
 
 def touching(
@@ -205,8 +208,9 @@ def main() -> None:
     if args.repeats < 1:
         parser.error(f"--repeats must be at least 1, got {args.repeats}")
     load = os.getloadavg()
-    text = timings(args.repeats)
+    text, medians = timings(args.repeats)
     print(text)
+    print(json.dumps({"objects": medians}))
     if args.docs:
         command = docs_command("bench_objects.py", sys.argv[1:])
         write_docs_block(DOCS, "bench_objects", text, command, host_load(load))

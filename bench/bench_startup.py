@@ -7,9 +7,9 @@ cache lacks), then ``--runs`` timed ones; also the time of a process that only i
 ``detect`` imports, and of one with numba alone (import it, call one trivial kernel from the
 cache: numba's floor in a one-shot process). ``--baseline REV``: the same detect run by turns
 from a temporary worktree of REV (the issue's "today" was the last revision without numba,
-435455f). ``--cold N``: also N runs on an empty numba cache (an install's first run), the
-kernels compiled in child processes or, as before, in the detect process itself
-(``SUPPORTNODE_PRECOMPILE=0``), by turns. Prints the tables and one JSON line (medians, s)
+435455f). ``--cold N``: also N runs on an empty numba cache (an install's first run) of the
+detect and of a node's warm-up, the kernels compiled in child processes or in that process
+itself (``SUPPORTNODE_PRECOMPILE=0``), by turns. Prints the tables and one JSON line (medians, s)
 for bench/ab.py; ``--docs`` writes the tables into docs/performance.md.
 
     python bench/bench_startup.py [--runs 5] [--align] [--baseline REV] [--cold N] [--docs]
@@ -32,6 +32,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import docs_command, host_load, table, write_docs_block
+
+from supportnode.kernels.precompile import usable_cores
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = REPO / "docs" / "performance.md"
@@ -76,27 +78,36 @@ def wall(cmd: list[str], source: Path | None = None, **extra: str) -> float:
     return time.perf_counter() - t
 
 
+# A node's warm-up before it subscribes (`supportnode run`'s), in a process of its own.
+NODE_WARM_UP = (
+    "from supportnode.node.rehearsal import warm_up; from supportnode.params import DetectParams;"
+    " warm_up(DetectParams())"
+)
+# Row name -> (what runs, SUPPORTNODE_PRECOMPILE); "0": compiled in that process, as before.
 _COLD_ROWS = {
-    "detect, kernels compiled in child processes": "1",
-    "detect, compiled in its own process": "0",  # SUPPORTNODE_PRECOMPILE=0, as before
+    "detect, kernels compiled in child processes": ("detect", "1"),
+    "detect, compiled in its own process": ("detect", "0"),
+    "node warm-up, kernels compiled in child processes": ("node", "1"),
+    "node warm-up, compiled in its own process": ("node", "0"),
 }
 
 
 def cold(detect: list[str], runs: int, times: dict[str, list[float]]) -> str:
-    """A table of ``detect`` on an empty numba cache (an install's first run), with and
-    without the child processes that compile the kernels, by turns; each run's seconds are
-    added to ``times`` under its row's name."""
+    """A table of ``detect`` and of a node's warm-up on an empty numba cache (an install's
+    first run), with and without the child processes that compile the kernels, by turns;
+    each run's seconds are added to ``times`` under its row's name."""
+    commands = {"detect": detect, "node": [sys.executable, "-c", NODE_WARM_UP]}
     times.update({k: [] for k in _COLD_ROWS})
     for _ in range(runs):
-        for name, switch in _COLD_ROWS.items():
+        for name, (what, switch) in _COLD_ROWS.items():
             with tempfile.TemporaryDirectory(prefix="bench-startup-cache-") as cache:
                 times[name].append(
-                    wall(detect, NUMBA_CACHE_DIR=cache, SUPPORTNODE_PRECOMPILE=switch)
+                    wall(commands[what], NUMBA_CACHE_DIR=cache, SUPPORTNODE_PRECOMPILE=switch)
                 )
     rows = [
         [k, round(statistics.median(times[k]), 2), min(times[k]), max(times[k])] for k in _COLD_ROWS
     ]
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cores = usable_cores()
     head = f"numba's cache empty (an install's first run), {runs} runs, {cores} cores\n\n"
     return head + table(rows, ["process", "median s", "min s", "max s"])
 

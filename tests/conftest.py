@@ -124,7 +124,7 @@ def spinning_node(**node_keys):
     """A `Node` spinning in a thread over real sockets (``node.*`` keys overridden; by default
     no map messages, diagnostics every 0.2 s): yields (node,
     its thread) once it is ready (kernels warmed: on an empty numba cache the first node of a
-    session compiles them, ~20 s on two cores, and publishes nothing meanwhile); stops it on exit."""
+    session compiles them, ~25 s on two cores, and publishes nothing meanwhile); stops it on exit."""
     from supportnode.node.node import Node
     from supportnode.params import DetectParams
 

@@ -1,8 +1,8 @@
 """A fresh install's kernels compiled on every core, once.
 
 numba compiles one kernel at a time in a process, and all of supportnode's take tens of
-seconds on one core: the first command after an install (a ``supportnode detect``, a node's
-warm-up) paid that in full. When the kernel modules a process has imported lack cache entries
+seconds on one core, which the first command after an install (a ``supportnode detect``, a
+node's warm-up) would wait for in full. When the kernel modules a process has imported lack cache entries
 for several kernels (an empty cache, or a new numba), `compile_cold` starts child processes
 that compile every kernel module into numba's cache (the same one: a child runs the same
 package with the same environment), each taking the next module when it finishes one, waits
@@ -10,7 +10,8 @@ for them, and the caller then loads its kernels from the cache. A warm cache cos
 the index files of the modules already imported; a child that fails costs its time only (the
 caller compiles whatever is still missing itself). Measured: ``bench/bench_startup.py --cold``.
 
-``SUPPORTNODE_PRECOMPILE=0`` turns it off. A child, ``python -m
+``SUPPORTNODE_PRECOMPILE=0`` turns it off (1, the default, on; any other value is one
+warning, and off). A child, ``python -m
 supportnode.kernels.precompile``, compiles the kernel module named on each line of its stdin
 and answers with the name: each child takes the next module when it finishes one.
 """
@@ -33,7 +34,7 @@ from typing import Any
 
 _PACKAGE = "supportnode.kernels"
 _NOT_KERNELS = frozenset({"runtime", "precompile"})
-_SWITCH = "SUPPORTNODE_PRECOMPILE"  # "0": never; set to "0" in the children (no grandchildren)
+_SWITCH = "SUPPORTNODE_PRECOMPILE"  # "0" off, "1" on; "0" in the children (no grandchildren)
 _MAX_WORKERS = 8  # each child holds numba and LLVM (~250 MB while compiling)
 _MIN_COLD = 8  # fewer cold kernels than this compile faster in the process than in children
 _DEADLINE_S = 900.0  # a child still compiling then is killed (all of them take ~40 s of CPU)
@@ -112,7 +113,11 @@ def compile_cold(workers: int | None = None) -> int:
     modules or more (a fresh install), compile every kernel module in up to ``workers``
     (None: the usable cores; at most 8) child processes at once, each taking the next module
     as it finishes one; returns how many children ran (0: none were needed)."""
-    if os.environ.get(_SWITCH, "1") == "0":
+    switch = os.environ.get(_SWITCH, "1")
+    if switch not in ("0", "1"):
+        log.warning("%s=%r: expected 0 or 1; compiling in this process", _SWITCH, switch)
+        return 0
+    if switch == "0":
         return 0
     names = kernel_modules()
     cold = cold_kernels(names)

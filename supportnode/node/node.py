@@ -253,9 +253,9 @@ class Node(Closing):
                 signal.signal(sig, old)
 
     def _warm(self) -> None:
-        """Compile (a fresh install: ~20 s on two cores) or load the kernels, saying so."""
+        """Compile (a fresh install: ~25 s on two cores) or load the kernels, saying so."""
         self.log.info(
-            "%s: preparing kernels (the first run after an install compiles them: ~20 s on two cores)",
+            "%s: preparing kernels (the first run after an install compiles them: ~25 s on two cores)",
             self.cfg.name,
         )
         took = warm_up(self.params, self.cfg.threads or None)

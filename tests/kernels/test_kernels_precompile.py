@@ -83,6 +83,16 @@ def test_switched_off_or_one_core_starts_no_child(monkeypatch):
     assert precompile.compile_cold(workers=0) == 0
 
 
+def test_a_bad_switch_value_is_one_warning_and_no_child(monkeypatch, caplog):
+    monkeypatch.setattr(precompile, "cold_kernels", lambda names: {"knn": 9, "rects": 1})
+    monkeypatch.setenv("SUPPORTNODE_PRECOMPILE", "off")
+    with caplog.at_level(logging.WARNING, logger="supportnode.kernels"):
+        assert precompile.compile_cold(workers=2) == 0
+    assert [r.getMessage() for r in caplog.records] == [
+        "SUPPORTNODE_PRECOMPILE='off': expected 0 or 1; compiling in this process"
+    ]
+
+
 def test_a_cold_cache_is_compiled_by_children_taking_modules_in_turn(monkeypatch, tmp_path):
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(precompile, "kernel_modules", lambda: ["rects", "neighbourhoods"])
