@@ -95,6 +95,7 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         from supportnode.io.results import write_detection
         from supportnode.io.units import UNITS
         from supportnode.kernels import runtime
+        from supportnode.kernels.loading import load_lightly
         from supportnode.pipeline import detect
 
     t0 = time.perf_counter()
@@ -104,6 +105,7 @@ def _run_cloud(args: argparse.Namespace, params: Any, name: str, out_dir: Path) 
         # so that the stage timings are the work on this cloud.
         bar.advance(0, "compiling kernels (once per install)")  # shown only when slow
         with long_lived():
+            load_lightly()  # this process only loads kernels (compiles refresh numba themselves)
             kernels_time = runtime.warm()
         bar.advance(0, "reading")
         runtime.keep_freed_memory()  # this process's: the stages reuse freed pages

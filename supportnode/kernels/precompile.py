@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 _PACKAGE = "supportnode.kernels"
-_NOT_KERNELS = frozenset({"runtime", "precompile"})
+_NOT_KERNELS = frozenset({"runtime", "precompile", "loading"})
 _SWITCH = "SUPPORTNODE_PRECOMPILE"  # "0" off, "1" on; "0" in the children (no grandchildren)
 _MAX_WORKERS = 8  # each child holds numba and LLVM (~250 MB while compiling)
 _MIN_COLD = 8  # fewer cold kernels than this compile faster in the process than in children

@@ -87,8 +87,10 @@ def warm_up(params: DetectParams, threads: int | None = None) -> float:
     numba's default), their compilation or cache load, then `rehearse`; seconds taken. The
     kernel modules the rehearsal imported are warmed after it (their other signatures)."""
     from supportnode.kernels import runtime
+    from supportnode.kernels.loading import load_lightly
 
     runtime.configure(threads)
+    load_lightly()  # the node's process: numba's compile set-up only when it compiles
     runtime.keep_freed_memory()  # the node's process: each scan reuses the last one's pages
     # The detection imports these kernel modules only for the clouds that need them (a depth
     # camera's surface bands and object faces); a node meets any cloud: loaded before its first.

@@ -24,7 +24,12 @@ def _indexed(cache: Path) -> set[str]:
 
 
 def test_kernel_modules_are_every_kernel_file_but_the_runtime():
-    files = {p.stem for p in KERNELS.glob("*.py")} - {"__init__", "runtime", "precompile"}
+    files = {p.stem for p in KERNELS.glob("*.py")} - {
+        "__init__",
+        "runtime",
+        "precompile",
+        "loading",
+    }
     assert precompile.kernel_modules() == sorted(files)
     assert "voxelstore" in files and "band" in files
 
