@@ -23,12 +23,13 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from supportnode.errors import InputError
 from supportnode.geometry.linalg import sym3_eigen_entries
 
 if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
+
     from supportnode.kernels.knn import KnnGrid
 
 __all__ = ["estimate_normals", "filter_vertical_normals", "normals_at"]
@@ -67,6 +68,7 @@ def normals_at(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Unoriented normals and curvature at ``query`` from neighbours among ``points``.
 
+    from scipy.spatial import cKDTree  # here: ~0.18 s to import
     tree: ``cKDTree(points)``; points: (N, 3) float64 m; query: (M, 3) float64 m.
     workers: threads of the k-d tree query (-1: all cores).
     Returns ``(normals (M, 3) unit, sign arbitrary; curvature (M,) in [0, 1/3])``.
@@ -187,6 +189,8 @@ def _grid(pts: np.ndarray, k: int) -> KnnGrid | None:
         return None
     sub = pts[::8]
     k_sub = max(2, -(-k // 8))
+    from scipy.spatial import cKDTree  # here: ~0.18 s to import
+
     dist, _ = cKDTree(sub).query(pts[:: max(1, len(pts) // 512)], k=k_sub + 1)
     typical = float(np.median(dist[:, -1]))  # +1: a sampled point finds itself first
     if not (np.isfinite(typical) and typical > 0):
@@ -209,6 +213,8 @@ def normals_among(
     big = workers != 1 and len(query) >= _PARALLEL_MIN_QUERIES
     grid = KnnGrid.build(points, spacing) if k >= 1 and spacing > 0 and not big else None
     if grid is None:
+        from scipy.spatial import cKDTree  # here: ~0.18 s to import
+
         tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
         return normals_at(tree, points, query, k, workers)
     return _grid_normals(grid, query, k, parallel=False)
@@ -276,6 +282,8 @@ def estimate_normals(
     if grid is not None:
         normals, curvature = _grid_normals_any(grid, pts, k)
     else:
+        from scipy.spatial import cKDTree  # here: ~0.18 s to import
+
         tree = cKDTree(pts, balanced_tree=False)  # sliding-midpoint build: 2x faster
         # Query in the tree's leaf order: neighbouring queries then touch the same nodes and
         # the same rows of the moments, which measured 10-25% faster than input order on
@@ -321,6 +329,8 @@ def filter_vertical_normals(
         sel = grid.sorted_index[mask[grid.sorted_index]]  # candidates in cell order
         normals, _ = _grid_normals(grid, pts[sel], k)
     else:
+        from scipy.spatial import cKDTree  # here: ~0.18 s to import
+
         tree = cKDTree(pts, balanced_tree=False)
         sel = tree.indices[mask[tree.indices]]  # candidates in the tree's leaf order
         normals, _ = normals_at(tree, pts, pts[sel], k, workers=workers)

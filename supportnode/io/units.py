@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 __all__ = ["UNITS", "UnitsGuess", "guess_units"]
 
@@ -73,7 +72,9 @@ def guess_units(points: np.ndarray) -> UnitsGuess:
     extent = float(np.linalg.norm(hi - lo))
     rng = np.random.default_rng(_SEED)
     sample = pts[rng.choice(len(pts), size=min(len(pts), _SAMPLE), replace=False)]
-    dist, _ = cKDTree(sample).query(sample[: min(len(sample), 1000)], k=2)
+    from supportnode.geometry.nearest import neighbour_distances  # numba: not for a reader
+
+    dist = neighbour_distances(sample, sample[: min(len(sample), 1000)], 2)
     # Spacing on a surface grows as 1/sqrt(density): scale the sample's back to all points.
     apart = dist[:, 1][dist[:, 1] > 0]  # repeated points (quantised depth) are no spacing
     if apart.size == 0:

@@ -241,9 +241,17 @@ def cluster_bottoms(
 
 @njit(cache=True, nogil=True)
 def _level_points(cp, planes, level):
-    live = np.flatnonzero(np.isfinite(planes[:, 0]))
+    # A loop, not np.flatnonzero: numba's version lives in numba.np.arraymath, which a cache
+    # load then imports, and with it scipy's BLAS (~80 ms of a fresh `supportnode detect`).
+    live = np.empty(planes.shape[0], np.int64)
+    k = 0
+    for s in range(planes.shape[0]):
+        if np.isfinite(planes[s, 0]):
+            live[k] = s
+            k += 1
+    live = live[:k]
     pl = planes[live]
-    m, k = cp.shape[0], live.shape[0]
+    m = cp.shape[0]
     count = np.zeros(m, np.int8)  # planes at whose level each point lies (first pass)
     for p in range(m):
         x, y, z = cp[p, 0], cp[p, 1], cp[p, 2]

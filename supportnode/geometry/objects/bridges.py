@@ -21,7 +21,6 @@ Pure: numpy in, labels out.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from supportnode.geometry.objects.faces import Cells
 from supportnode.geometry.objects.split_footprint import split_raster
@@ -190,6 +189,8 @@ def _bays(occ: np.ndarray) -> tuple[np.ndarray, float]:
     # inside theirs): the same hull, from a fraction of the cells.
     rim = occ.copy()
     rim[1:-1, 1:-1] &= ~(occ[:-2, 1:-1] & occ[2:, 1:-1] & occ[1:-1, :-2] & occ[1:-1, 2:])
+    from scipy.spatial import ConvexHull  # here: ~0.18 s to import
+
     eq = ConvexHull(np.argwhere(rim).astype(float)).equations  # n . x + d <= 0 inside
     empty = np.argwhere(~occ)
     to_edge = -(empty.astype(float) @ eq[:, :2].T + eq[:, 2])

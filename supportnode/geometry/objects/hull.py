@@ -8,8 +8,8 @@ Points p (P, 3) float64 metres, z up; footprints (K, 2) float64; volumes m^3; ya
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
+from supportnode.kernels.hull import footprint_hulls
 from supportnode.kernels.lines import column_ends
 from supportnode.kernels.rects import min_area_boxes
 
@@ -18,6 +18,30 @@ from supportnode.kernels.rects import min_area_boxes
 # Qhull takes fewer whole: a depth camera's points make no vertical lines (the mOSD scans'
 # clusters: nothing dropped), and Qhull on 3000 of them costs ~0.4 ms.
 _HULL_MAX_POINTS = 3000
+
+
+def footprint_ring(xy: np.ndarray) -> np.ndarray | None:
+    """The convex hull of xy (K, 2 or more) float64 m in x, y: its vertices (V, 2),
+    counter-clockwise, no collinear ones; None when it has no area (fewer than three points
+    off one line), where Qhull would raise."""
+    pts = np.ascontiguousarray(xy, dtype=np.float64)
+    rows, _ = footprint_hulls(pts, np.zeros(1, np.int64), np.full(1, len(pts), np.int64))
+    return pts[rows, :2] if len(rows) >= 3 else None
+
+
+def footprint_equations(ring: np.ndarray) -> np.ndarray:
+    """(V, 3) float64: each edge of a counter-clockwise ``ring`` (V, 2) as Qhull gives a
+    facet: unit outward normal (nx, ny) and offset d, nx x + ny y + d <= 0 inside."""
+    a, b = ring, np.roll(ring, -1, axis=0)
+    n = np.column_stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]])
+    n /= np.sqrt(n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1])[:, None]
+    return np.column_stack([n, -(n[:, 0] * a[:, 0] + n[:, 1] * a[:, 1])])
+
+
+def footprint_area(ring: np.ndarray) -> float:
+    """Area (m^2) of the polygon ``ring`` (V, 2), counter-clockwise (the shoelace)."""
+    x, y = ring[:, 0] - ring[0, 0], ring[:, 1] - ring[0, 1]  # small numbers: exact enough
+    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)))
 
 
 def _volume(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -52,6 +76,8 @@ def _hull_3d(q: np.ndarray) -> float:
     volume = hull_volume(np.ascontiguousarray(q, dtype=np.float64))
     if volume != FAILED:
         return float(volume)
+    from scipy.spatial import ConvexHull, QhullError  # rare: not on every detection's path
+
     try:  # round-off broke the compiled hull's faces (near-coplanar slivers): Qhull merges
         return float(ConvexHull(q).volume)
     except (QhullError, ValueError):

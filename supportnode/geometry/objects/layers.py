@@ -20,10 +20,11 @@ Points p (P, 3) float64 metres, z up; labels (M,) int64, -1 none.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from supportnode.geometry.nearest import count_within, within
 from supportnode.geometry.objects.clusters import _cluster_voxel
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
+from supportnode.geometry.objects.hull import footprint_area, footprint_equations, footprint_ring
 from supportnode.geometry.objects.rising import Footprint, footprint
 from supportnode.geometry.objects.stacks import _INSIDE, _MAX_BESIDE, _MIN_SHARE, _MIN_TOP
 from supportnode.kernels.groups import group_rows
@@ -270,8 +271,8 @@ def _flat(p: np.ndarray, mine: np.ndarray, slab: np.ndarray, face: np.ndarray) -
     _FLAT_RADIUS of each, at least _FLAT, and _FLAT_MIN, lie in the level's slab (the rows
     p[slab])."""
     r = _FLAT_RADIUS
-    near = cKDTree(p[mine]).query_ball_point(p[face], r, return_length=True)
-    level = cKDTree(p[slab]).query_ball_point(p[face], r, return_length=True)
+    near = count_within(p[mine], p[face], r)
+    level = count_within(p[slab], p[face], r)
     return (level >= _FLAT * near) & (level >= _FLAT_MIN)
 
 
@@ -279,14 +280,13 @@ class _Below:
     """What of a holder lies below a level: its points' x, y (L, 2), metres."""
 
     def __init__(self, xy: np.ndarray) -> None:
-        self.tree = cKDTree(xy) if len(xy) else None
+        self.xy = xy
 
     def under(self, xy: np.ndarray) -> np.ndarray:
         """(Q,) bool: which of xy (Q, 2) have a point below within _COLUMN in x, y."""
-        if self.tree is None or len(xy) == 0:
+        if len(self.xy) == 0 or len(xy) == 0:
             return np.zeros(len(xy), bool)
-        d, _ = self.tree.query(xy, k=1, distance_upper_bound=_COLUMN)
-        return np.isfinite(d)
+        return within(self.xy, xy, _COLUMN)
 
 
 def _stands(
@@ -325,12 +325,11 @@ def _inside(outline_xy: np.ndarray, xy: np.ndarray, margin: float) -> np.ndarray
     outline_xy (K, 2) (all of them when the hull is degenerate: a line holds no outline)."""
     if len(xy) == 0:
         return np.zeros(0, bool)
-    try:
-        hull = ConvexHull(outline_xy)
-    except (QhullError, ValueError):
+    ring = footprint_ring(outline_xy) if len(outline_xy) >= 3 else None
+    if ring is None:
         return np.ones(len(xy), bool)
-    # Each facet: normal . x + offset <= 0 inside (unit normals).
-    return np.all(xy @ hull.equations[:, :2].T + hull.equations[:, 2] <= margin, axis=1)
+    eq = footprint_equations(ring)  # each edge: normal . x + offset <= 0 inside (unit normals)
+    return np.all(xy @ eq[:, :2].T + eq[:, 2] <= margin, axis=1)
 
 
 def _face_points(min_points: int) -> int:
@@ -342,8 +341,7 @@ def _face_points(min_points: int) -> int:
 def _spacing(xy: np.ndarray) -> float:
     """The typical distance (m) between neighbouring points of xy (K, 2) spread over their
     hull: a sparse face's hull falls short of its edge by about that much."""
-    try:
-        area = ConvexHull(xy).volume
-    except (QhullError, ValueError):
+    ring = footprint_ring(xy) if len(xy) >= 3 else None
+    if ring is None:
         return 0.0
-    return float(np.sqrt(area / len(xy)))
+    return float(np.sqrt(footprint_area(ring) / len(xy)))

@@ -18,8 +18,8 @@ from __future__ import annotations
 import copy
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from supportnode.geometry.nearest import nearest_within
 from supportnode.geometry.objects.support_lookup import _SupportLookup
 from supportnode.geometry.surfaces import Surface
 from supportnode.kernels.footprint import fill_holes, label8
@@ -148,10 +148,7 @@ def nearest_object_point(xyz: np.ndarray, obj_xyz: np.ndarray, reach: float) -> 
     out = np.full(len(xyz), -1, dtype=np.int64)
     if len(xyz) == 0 or len(obj_xyz) == 0:
         return out
-    dist, k = cKDTree(obj_xyz).query(xyz, distance_upper_bound=reach)
-    hit = np.isfinite(dist)
-    out[hit] = k[hit]
-    return out
+    return nearest_within(obj_xyz, xyz, reach)[1]
 
 
 def nearest_bottom(

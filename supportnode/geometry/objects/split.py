@@ -17,9 +17,9 @@ import functools
 from collections.abc import Callable
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from supportnode.geometry.memo import Memo
+from supportnode.geometry.nearest import nearest
 from supportnode.geometry.objects.convexity import _MAX_EXTENT
 from supportnode.geometry.objects.layers import Groups
 from supportnode.geometry.objects.split_concave import (
@@ -260,10 +260,10 @@ def _with_level(parts: np.ndarray, level: np.ndarray | None, xy: np.ndarray) -> 
     own = ~level
     out[own] = parts
     if parts.max() > 0:
-        out[level] = parts[cKDTree(xy[own]).query(xy[level])[1]]
+        out[level] = parts[nearest(xy[own], xy[level])]
     return out
 
 
 def _nearest(xy: np.ndarray, query: np.ndarray) -> np.ndarray:
     """(Q,) row of the point of xy (P, 2) nearest each of query (Q, 2)."""
-    return cKDTree(xy).query(query)[1]
+    return nearest(xy, query)

@@ -15,10 +15,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull, cKDTree
 
 from supportnode.geometry.linalg import sym3_eigen
+from supportnode.geometry.nearest import nearest
 from supportnode.geometry.objects.arrays import _col
+from supportnode.geometry.objects.hull import footprint_equations, footprint_ring
 from supportnode.geometry.objects.neighbours import FORWARD_26
 from supportnode.geometry.objects.split_step import _STEP_STAND
 from supportnode.kernels.components import label_edges
@@ -76,7 +77,7 @@ def _nearest_seed(q: np.ndarray, parts: list[np.ndarray], min_points: int) -> np
     holds fewer than min_points."""
     seed = np.concatenate(parts)
     seed_part = np.repeat(np.arange(len(parts)), [len(s) for s in parts])
-    _, near = cKDTree(q[seed, :2]).query(q[:, :2], k=1)
+    near = nearest(q[seed, :2], q[:, :2])
     part = seed_part[near]
     counts = np.bincount(part, minlength=len(parts))
     if counts.min() < min_points:
@@ -318,7 +319,10 @@ def _outer(xy: np.ndarray, parts: list[np.ndarray], voxel: float) -> list[np.nda
     half a voxel of the x, y convex hull's edge: each object of a touching group shows the
     group an outer wall; the inner arc of a barrel in a triangle, between its two contacts,
     is the same barrel's wall."""
-    eq = ConvexHull(xy).equations  # (F, 3): n . p + d <= 0 inside, |n| = 1
+    ring = footprint_ring(xy)
+    if ring is None:  # all on a line: no wall to show
+        return []
+    eq = footprint_equations(ring)  # (F, 3): n . p + d <= 0 inside, |n| = 1
     out = []
     for rows in parts:  # only the seeds' points: a wall cluster holds 100k
         seed = np.take(xy, rows, axis=0)
