@@ -34,6 +34,20 @@ _LOAD_THEN_COMPILE = textwrap.dedent(
 
     print("compiled", _sorted(np.array([3.0, 1.0, 2.0])).tolist())
     print("registries", "numba.typed.typedset" in sys.modules)
+
+    # A loaded library's functions are found, a name it lacks is 0, and a new kernel that
+    # calls a loaded one links it (its bitcode parsed then).
+    library = next(iter(rects._boxes.overloads.values())).library
+    print("lazy", "_supportnode_bitcode" in library.__dict__)
+    print("missing", library.get_pointer_to_function("no_such_function"))
+
+    @njit
+    def _via(x, y, starts, angles, cos, sin):
+        return rects._boxes(x, y, starts, angles, cos, sin)
+
+    best, ext = _via(z, np.array([0.0, 0.0, 1.0]), np.array([0, 3]), z, z + 1, z)
+    print("linked", best.tolist(), ext.tolist())
+    print("lazy", "_supportnode_bitcode" in library.__dict__)
     """
 )
 
@@ -54,6 +68,9 @@ def test_light_loads_skip_the_registries_and_compiles_still_load_them():
     assert out["registries"] == ["False", "True"]  # skipped by the loads, loaded by the compile
     assert out["lock_events"] == ["[]"]
     assert out["compiled"] == ["[1.0, 2.0, 3.0]"]
+    assert out["lazy"] == ["True", "False"]  # parsed once a compile linked it
+    assert out["missing"] == ["0"]
+    assert out["linked"] == out["kernel"]
 
 
 def test_a_kernel_loaded_lightly_gives_what_it_gives_after_a_full_load():
