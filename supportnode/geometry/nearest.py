@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from supportnode.kernels.radius import count_within, nearest_within
+from supportnode.kernels.radius import as_xyz, count_within, nearest_within
 
 __all__ = ["count_within", "nearest", "nearest_within", "neighbour_distances", "within"]
 
@@ -28,7 +28,7 @@ def nearest(points: np.ndarray, query: np.ndarray) -> np.ndarray:
 def neighbour_distances(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:
     """(Q, k) float64 m: the distances to the k nearest of ``points`` (N >= k) from each of
     ``query``, nearest first (a query among the points finds itself first, at 0)."""
-    pts, qry = _three(points), _three(query)
+    pts, qry = as_xyz(points), as_xyz(query, "query")
     rows = _knn_rows(pts, qry, k)
     d = pts[rows] - qry[:, None, :]
     return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
@@ -42,7 +42,7 @@ def within(points: np.ndarray, query: np.ndarray, bound: float) -> np.ndarray:
 def _knn_rows(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:
     from supportnode.kernels.knn import KnnGrid
 
-    pts, qry = _three(points), _three(query)
+    pts, qry = as_xyz(points), as_xyz(query, "query")
     if not 1 <= k <= len(pts):
         raise ValueError(f"k must lie in [1, {len(pts)}] (the points), got {k}")
     if len(qry) == 0:
@@ -75,12 +75,3 @@ def _brute_rows(pts: np.ndarray, qry: np.ndarray, k: int) -> np.ndarray:
         d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
         out[start : start + 256] = np.argsort(d2, axis=1, kind="stable")[:, :k]
     return out
-
-
-def _three(a: np.ndarray) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
-        raise ValueError(f"points must be (N, 2) or (N, 3), got {arr.shape}")
-    if arr.shape[1] == 2:
-        return np.column_stack([arr, np.zeros(len(arr))])
-    return np.ascontiguousarray(arr)

@@ -17,6 +17,10 @@ Conventions:
 - A kernel that replaces numpy code gives the same bits: the same operations in the same order
   (numpy's pairwise sums reproduced; its arccos and cos kept, its SIMD versions rounding
   differently from the C library's), and the numpy version stays as the tests' reference.
+- No numba array math from ``numba.np.arraymath`` in a kernel (``ndarray.any``,
+  ``np.flatnonzero``, ...: write the loop): loading such a kernel from the cache imports that
+  module, and scipy's BLAS with it, ~80 ms of a fresh ``supportnode detect`` (tested in
+  ``tests/kernels/test_kernels_loading.py``; `loading` says what else a load skips).
 - ``parallel=True`` / ``prange`` only where measured to pay on two cores; the threading layer
   and thread count are set once by :func:`runtime.configure` (``node.threads``).
 - This package's ``__init__`` imports nothing: ``import supportnode.client`` must not load numba.

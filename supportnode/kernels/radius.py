@@ -71,7 +71,7 @@ def _visit(pts, order, keys, lo, inv, dims, q, r2, strict, count_only):  # type:
 
 
 @njit(cache=True, nogil=True)
-def _count(
+def _queries(
     pts: np.ndarray,
     order: np.ndarray,
     keys: np.ndarray,
@@ -80,34 +80,22 @@ def _count(
     dims: np.ndarray,
     query: np.ndarray,
     r2: float,
-) -> np.ndarray:
-    out = np.empty(query.shape[0], np.int64)
+    nearest: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    # Each query's count within r (nearest False), or its nearest closer than r (True).
+    count = np.zeros(query.shape[0], np.int64)
+    d2 = np.full(query.shape[0], np.inf)
+    rows = np.full(query.shape[0], -1, np.int64)
     for m in range(query.shape[0]):
-        out[m] = _visit(pts, order, keys, lo, inv, dims, query[m], r2, False, True)[0]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def _nearest(
-    pts: np.ndarray,
-    order: np.ndarray,
-    keys: np.ndarray,
-    lo: np.ndarray,
-    inv: float,
-    dims: np.ndarray,
-    query: np.ndarray,
-    b2: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    d2 = np.empty(query.shape[0])
-    rows = np.empty(query.shape[0], np.int64)
-    for m in range(query.shape[0]):
-        _, d2[m], rows[m] = _visit(pts, order, keys, lo, inv, dims, query[m], b2, True, False)
-    return d2, rows
+        count[m], d2[m], rows[m] = _visit(
+            pts, order, keys, lo, inv, dims, query[m], r2, nearest, not nearest
+        )
+    return count, d2, rows
 
 
 def _prepare(points: np.ndarray, query: np.ndarray, radius: float, what: str) -> tuple:
     """Both sets as (N, 3) float64 (x, y padded with z = 0), finite; the cells' arrays."""
-    pts, qry = (_three(a, what, name) for a, name in ((points, "points"), (query, "query")))
+    pts, qry = (as_xyz(a, f"{what}: {name}") for a, name in ((points, "points"), (query, "query")))
     if not (np.isfinite(radius) and radius >= 0):
         raise ValueError(f"{what}: the radius must be finite and >= 0, got {radius}")
     if len(pts) == 0:
@@ -121,13 +109,16 @@ def _prepare(points: np.ndarray, query: np.ndarray, radius: float, what: str) ->
     return pts, qry, (order, keys, lo, inv, dims)
 
 
-def _three(a: np.ndarray, what: str, name: str) -> np.ndarray:
+def as_xyz(a: np.ndarray, what: str = "points") -> np.ndarray:
+    """``a`` (N, 2) or (N, 3) float m as (N, 3) float64, contiguous, x, y sets at z = 0 (every
+    squared distance the same bits as from x, y alone). Raises ValueError naming ``what`` on
+    another shape or a non-finite coordinate."""
     arr = np.asarray(a, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] not in (2, 3):
-        raise ValueError(f"{what}: {name} must be (N, 2) or (N, 3), got {arr.shape}")
+        raise ValueError(f"{what} must be (N, 2) or (N, 3), got {arr.shape}")
     if not np.isfinite(arr).all():
-        raise ValueError(f"{what}: {name} must be finite")
-    if arr.shape[1] == 2:  # + 0.0 leaves every squared sum as x, y alone gives it
+        raise ValueError(f"{what} must be finite")
+    if arr.shape[1] == 2:
         return np.column_stack([arr, np.zeros(len(arr))])
     return np.ascontiguousarray(arr)
 
@@ -141,7 +132,7 @@ def count_within(points: np.ndarray, query: np.ndarray, radius: float) -> np.nda
     if cells is None:
         return np.zeros(len(qry), np.int64)
     order, keys, lo, inv, dims = cells
-    return _count(pts, order, keys, lo, inv, dims, qry, radius * radius)
+    return _queries(pts, order, keys, lo, inv, dims, qry, radius * radius, False)[0]
 
 
 def nearest_within(
@@ -155,7 +146,7 @@ def nearest_within(
     if cells is None:
         return np.full(len(qry), np.inf), np.full(len(qry), -1, np.int64)
     order, keys, lo, inv, dims = cells
-    d2, rows = _nearest(pts, order, keys, lo, inv, dims, qry, bound * bound)
+    _, d2, rows = _queries(pts, order, keys, lo, inv, dims, qry, bound * bound, True)
     return np.sqrt(d2), rows
 
 
