@@ -48,8 +48,9 @@ def _knn_rows(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:
     if len(qry) == 0:
         return np.zeros((0, k), np.int64)
     grid = KnnGrid.build(pts, _cell(pts))
-    if grid is None:  # cannot happen with _cell's edge; kept exact all the same
-        return _brute_rows(pts, qry, k)
+    # _cell's edge makes at most 8 cells a point, within 2**19 along an axis: KnnGrid's
+    # limits are 16 a point and 2**20.
+    assert grid is not None
     # One thread: these queries are small, and the parallel kernel would compile for ~7 s
     # on a fresh install's first big cloud.
     return grid.query(qry, k, parallel=False)
@@ -66,12 +67,3 @@ def _cell(pts: np.ndarray) -> float:
             return max(size, float(extent.max()) / _MAX_CELLS_PER_AXIS)
         spread &= ~thin
     return 1.0
-
-
-def _brute_rows(pts: np.ndarray, qry: np.ndarray, k: int) -> np.ndarray:
-    out = np.empty((len(qry), k), np.int64)
-    for start in range(0, len(qry), 256):
-        d = pts[None, :, :] - qry[start : start + 256, None, :]
-        d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
-        out[start : start + 256] = np.argsort(d2, axis=1, kind="stable")[:, :k]
-    return out

@@ -39,9 +39,9 @@ def _cells(pts, lo, inv, dims):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, nogil=True)
-def _visit(pts, order, keys, lo, inv, dims, q, r2, strict, count_only):  # type: ignore[no-untyped-def]
-    # Over the 3 x 3 x 3 cells around q: (count of points with d2 <= r2, or the nearest with
-    # d2 < r2 when strict) -> (count, best d2, best row).
+def _visit(pts, order, keys, lo, inv, dims, q, r2, nearest):  # type: ignore[no-untyped-def]
+    # Over the 3 x 3 x 3 cells around q: the count of points with d2 <= r2 (nearest False),
+    # or the nearest with d2 < r2 (True) -> (count, best d2, best row).
     # q's cell, clamped just outside the grid (a far query's would overflow an int).
     c0 = int(min(max(np.floor((q[0] - lo[0]) * inv), -2.0), dims[0] + 1.0))
     c1 = int(min(max(np.floor((q[1] - lo[1]) * inv), -2.0), dims[1] + 1.0))
@@ -62,7 +62,7 @@ def _visit(pts, order, keys, lo, inv, dims, q, r2, strict, count_only):  # type:
                 dy = pts[p, 1] - q[1]
                 dz = pts[p, 2] - q[2]
                 d2 = dx * dx + dy * dy + dz * dz
-                if count_only:
+                if not nearest:
                     if d2 <= r2:
                         count += 1
                 elif d2 < r2 and (d2 < best or (d2 == best and p < row)):
@@ -87,9 +87,7 @@ def _queries(
     d2 = np.full(query.shape[0], np.inf)
     rows = np.full(query.shape[0], -1, np.int64)
     for m in range(query.shape[0]):
-        count[m], d2[m], rows[m] = _visit(
-            pts, order, keys, lo, inv, dims, query[m], r2, nearest, not nearest
-        )
+        count[m], d2[m], rows[m] = _visit(pts, order, keys, lo, inv, dims, query[m], r2, nearest)
     return count, d2, rows
 
 

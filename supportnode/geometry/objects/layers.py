@@ -325,7 +325,7 @@ def _inside(outline_xy: np.ndarray, xy: np.ndarray, margin: float) -> np.ndarray
     outline_xy (K, 2) (all of them when the hull is degenerate: a line holds no outline)."""
     if len(xy) == 0:
         return np.zeros(0, bool)
-    ring = footprint_ring(outline_xy) if len(outline_xy) >= 3 else None
+    ring = footprint_ring(outline_xy)
     if ring is None:
         return np.ones(len(xy), bool)
     eq = footprint_equations(ring)  # each edge: normal . x + offset <= 0 inside (unit normals)
@@ -341,7 +341,7 @@ def _face_points(min_points: int) -> int:
 def _spacing(xy: np.ndarray) -> float:
     """The typical distance (m) between neighbouring points of xy (K, 2) spread over their
     hull: a sparse face's hull falls short of its edge by about that much."""
-    ring = footprint_ring(xy) if len(xy) >= 3 else None
+    ring = footprint_ring(xy)
     if ring is None:
         return 0.0
     return float(np.sqrt(footprint_area(ring) / len(xy)))

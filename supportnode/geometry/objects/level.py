@@ -145,9 +145,8 @@ def nearest_object_point(xyz: np.ndarray, obj_xyz: np.ndarray, reach: float) -> 
     """(K,) int64 for each level point xyz (K, 3), the row of the nearest object point of
     obj_xyz (M, 3) within ``reach`` metres, else -1: the level point goes wherever that
     point goes, splits included."""
-    out = np.full(len(xyz), -1, dtype=np.int64)
     if len(xyz) == 0 or len(obj_xyz) == 0:
-        return out
+        return np.full(len(xyz), -1, dtype=np.int64)
     return nearest_within(obj_xyz, xyz, reach)[1]
 
 
