@@ -402,6 +402,7 @@ def _pooled(runs: list[dict]) -> dict:
 _STAGE_ROWS = (
     ("merge (map)", "map"),
     ("map points", "points"),
+    ("clearing (after the surfaces)", "clear"),
     ("surfaces", "surfaces"),
     ("objects", "objects"),
     ("free space", "free_space"),

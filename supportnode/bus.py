@@ -270,14 +270,20 @@ class Subscriber(_Socket):
         """Messages received and kept but not yet returned by `recv`."""
         return len(self._pending)
 
-    def recv(self, timeout_s: float | None = None) -> Frames | Any | None:
+    def recv(self, timeout_s: float | None = None, wake: int | None = None) -> Frames | Any | None:
         """The oldest kept message after draining the socket, or None after ``timeout_s``.
 
         ``timeout_s``: None waits forever, 0 only looks. Frame 0 is the topic (bytes); payload
         frames are zero-copy memoryviews valid as long as they are referenced. With a
-        ``check``: what it returned for the message.
+        ``check``: what it returned for the message. ``wake``: a file descriptor (a socket's)
+        waited on as well: None as soon as it is readable (the caller reads it).
         """
         deadline = None if timeout_s is None else time.monotonic() + max(0.0, timeout_s)
+        poller = None
+        if wake is not None:
+            poller = zmq.Poller()
+            poller.register(self.socket, zmq.POLLIN)
+            poller.register(wake, zmq.POLLIN)
         while True:
             self.keep_connected()
             self._drain()
@@ -291,9 +297,10 @@ class Subscriber(_Socket):
                     return None
                 wait_ms = min(max(1, int(left * 1000)), _WAIT_SLICE_MS)
             # A wake-up may bring only other topics' messages: loop until the deadline.
-            if not self.socket.poll(wait_ms, zmq.POLLIN) and deadline is not None:
-                if time.monotonic() >= deadline:
-                    return None
+            if poller is None:
+                self.socket.poll(wait_ms, zmq.POLLIN)
+            elif wake in dict(poller.poll(wait_ms)):
+                return None
 
     def _drain(self) -> None:
         """Move everything that has arrived into the kept queue, dropping the oldest.

@@ -136,6 +136,28 @@ def test_recv_timeout_returns_none_promptly():
         assert sub.recv(0) is None
 
 
+def test_recv_returns_when_its_wake_descriptor_is_readable():
+    """A wait on the socket and on another descriptor: None as soon as that one is readable
+    (well before the timeout), the message first when both are ready."""
+    import socket
+
+    a, b = socket.socketpair()
+    with Publisher("inproc://wake", "scan") as pub, Subscriber("inproc://wake", "scan") as sub:
+        time.sleep(0.1)
+        t0 = time.monotonic()
+        assert sub.recv(0.1, wake=a.fileno()) is None  # nothing rang: the whole timeout
+        assert time.monotonic() - t0 >= 0.09
+        b.send(b"x")
+        t0 = time.monotonic()
+        assert sub.recv(5.0, wake=a.fileno()) is None
+        assert time.monotonic() - t0 < 1.0
+        pub.send([b"scan", b"1"])
+        time.sleep(0.05)
+        assert bytes(sub.recv(5.0, wake=a.fileno())[1]) == b"1"  # still rung: messages first
+    a.close()
+    b.close()
+
+
 def test_inproc_shared_context():
     ctx = zmq.Context()
     try:

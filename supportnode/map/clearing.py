@@ -1,77 +1,28 @@
 """Free-space clearing: a scan's rays remove the evidence of the voxels they pass through.
 
-The rays' march (`kernels.rays`, compiled, without the interpreter lock) runs on a helper
-thread while the scan's voxels merge: it reads the key table as it was before the scan (the
-merge inserts its new keys only once the march is done), and the voxels this scan hit are
-dropped from its pairs afterwards, so the map equals a march after the merge. The node's
-receiving thread gains the march's time (~3.5 ms of a 131k-point scan) when a second core is
-free, and loses a thread hand-off when not.
+The rays' march (`kernels.rays`, compiled) runs on the map after the scan's merge, whose
+voxels it skips (seen, not seen through). The node runs it once its detection has taken the
+map's points (`VoxelMap.settle`): beside the detection, on the receiving thread.
 """
 
 from __future__ import annotations
 
-import os
-import threading
-from concurrent.futures import Future, ThreadPoolExecutor
-
 import numpy as np
 
 from supportnode.kernels.rays import ray_voxels
-from supportnode.map.keys import _OFFS, _SHIFTS, pack_keys
+from supportnode.map.keys import _OFFS, _SHIFTS
 from supportnode.map.scan import _plane_fits
 from supportnode.map.state import StoreState
 
 _SHIFT_ARR = np.array(_SHIFTS, np.int64)
 
-_EXECUTOR: tuple[int, ThreadPoolExecutor] | None = None
-_EXECUTOR_LOCK = threading.Lock()
-
-
-def _executor() -> ThreadPoolExecutor:
-    """One marching thread per process (a forked child makes its own: threads do not fork)."""
-    global _EXECUTOR
-    with _EXECUTOR_LOCK:
-        if _EXECUTOR is None or _EXECUTOR[0] != os.getpid():
-            pool = ThreadPoolExecutor(1, thread_name_prefix="supportnode-rays")
-            _EXECUTOR = (os.getpid(), pool)
-        return _EXECUTOR[1]
-
-
-class March:
-    """A scan's rays (unit directions ``u`` (R, 3), hits ``pts`` (R, 3), metres) and their
-    march in flight; `pairs` waits for it once."""
-
-    def __init__(self, u: np.ndarray, pts: np.ndarray, future: Future) -> None:
-        self.u, self.pts = u, pts
-        self._future: Future | None = future
-        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
-
-    def pairs(self) -> tuple[np.ndarray, np.ndarray]:
-        """(ray, slot) pairs, (M,) int64 each, of the stored voxels the rays pass through."""
-        if self._pairs is None:
-            assert self._future is not None
-            self._pairs, self._future = self._future.result(), None
-        return self._pairs
-
 
 class Clearing(StoreState):
     """Mixin of `VoxelMap`: ray clearing."""
 
-    def _begin_clear(self, cols: list[np.ndarray], origin: np.ndarray) -> March:
-        """Sample the scan's clearing rays and start their march (see the module docstring);
-        call before `_merge`, and finish with `_clear`."""
-        size = self.size
-        pack_keys(np.floor(origin / size).astype(np.int64)[None])  # range check of the origin
-        u, n, pts = self._sample_rays(cols, origin)
-        table = self._hash.table
-        scan = self._scans
-        future = _executor().submit(
-            ray_voxels, origin, u, n, size, table, _OFFS, _SHIFT_ARR, self._last_scan, scan
-        )
-        return March(u, pts, future)
-
-    def _clear(self, march: March, origin: np.ndarray) -> np.ndarray:
-        """Free-space clearing along the scan's rays; returns the removed (R, 3) keys.
+    def _clear(self, cols: list[np.ndarray], origin: np.ndarray) -> np.ndarray:
+        """Free-space clearing along the rays of the scan just merged (its x, y, z columns
+        (N,), map frame, from ``origin`` (3,)); returns the removed (R, 3) keys.
 
         Rays (a random subset of ``clear_rays``) are sampled every voxel length from the origin
         up to two voxels before their hit. A stored voxel met on the way and not hit by this
@@ -85,13 +36,18 @@ class Clearing(StoreState):
           same horizontal surface never clears it (z is up in the map frame).
         Evidence drops by one per scan, by two when three or more rays agree.
         """
-        ray, slot = march.pairs()
-        # The voxels this scan hit are seen, not seen through (the march ran on the table
-        # from before the merge).
-        seen = self._last_scan[slot] == self._scans
-        if seen.any():
-            ray, slot = ray[~seen], slot[~seen]
-        u, pts = march.u, march.pts
+        u, n, pts = self._sample_rays(cols, origin)
+        ray, slot = ray_voxels(
+            origin,
+            u,
+            n,
+            self.size,
+            self._hash.table,
+            _OFFS,
+            _SHIFT_ARR,
+            self._last_scan,
+            self._scans,
+        )
         if len(slot) == 0:
             return np.zeros((0, 3), np.int64)
         through = self._through(slot, origin, u[ray], pts[ray])

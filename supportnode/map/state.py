@@ -51,6 +51,8 @@ class StoreState:
     _pts: np.ndarray
     _raw_n: np.ndarray
     _raw_head: np.ndarray
+    # The last merged scan's map-frame columns, origin and stamp, until `settle` clears.
+    _pending: tuple[list[np.ndarray], np.ndarray, float] | None
 
     def __len__(self) -> int:
         return self._hash.size
@@ -59,4 +61,7 @@ class StoreState:
         raise NotImplementedError
 
     def _remove(self, slots: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def settle(self) -> np.ndarray:
         raise NotImplementedError

@@ -28,7 +28,7 @@ import numpy as np
 from supportnode.errors import InputError
 from supportnode.geometry.transform import transform_points
 from supportnode.kernels.places import kept_points
-from supportnode.map.clearing import Clearing, March
+from supportnode.map.clearing import Clearing
 from supportnode.map.forget import Forgetting
 from supportnode.map.hash import KeyHash
 from supportnode.map.keys import pack_keys
@@ -106,6 +106,7 @@ class VoxelMap(Merging, Clearing, Forgetting):
         self.crop_slack = 0.05 * self.params.radius if crop_slack is None else float(crop_slack)
         self.age_slack = 0.1 * self.params.max_age if age_slack is None else float(age_slack)
         self._rng = np.random.default_rng(seed)
+        self._pending = None
         self._buffers: dict[str, np.ndarray] = {}  # per-scan scratch, see _buffer
         self._hash = KeyHash()
         self._alloc_store(1 << 12)
@@ -217,7 +218,7 @@ class VoxelMap(Merging, Clearing, Forgetting):
         *,
         in_map_frame: bool = False,
     ) -> Touched:
-        """Merge one scan.
+        """Merge one scan and clear along its rays: :meth:`merge` then :meth:`settle`.
 
         points: (N, 3) float, metres, in the sensor frame (or already in the map frame with
             ``in_map_frame=True``). Non-finite points (a driver's misses) are skipped.
@@ -226,43 +227,8 @@ class VoxelMap(Merging, Clearing, Forgetting):
         stamp: seconds, non-decreasing across calls (ages are measured from the newest stamp).
         Returns the voxels hit and removed, and the scan's bounding box (:class:`Touched`).
         """
-        pts = np.asarray(points, dtype=np.float64)
-        pose = np.asarray(pose, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise InputError(f"points must be an (N, 3) array, got shape {pts.shape}")
-        if pose.shape != (4, 4) or not np.isfinite(pose).all():
-            raise InputError("pose must be a finite (4, 4) sensor-to-map transform")
-        # Column by column: numpy reduces the short axis of an (N, 3) array 5-20x slower.
-        finite = np.isfinite(pts[:, 0] + pts[:, 1] + pts[:, 2])
-        if not finite.all():
-            self._stats["points_invalid"] += int((~finite).sum())
-            pts = pts[finite]
-        # The map frame points as three contiguous columns, what voxelizing works on: the
-        # same operations as transform_points, written straight into columns.
-        if in_map_frame:
-            cols = [np.ascontiguousarray(pts[:, a]) for a in range(3)]
-        else:
-            rot, shift = pose[:3, :3], pose[:3, 3]
-            cols = []
-            for i in range(3):  # three output columns
-                col = np.multiply(pts[:, 0], rot[i, 0])
-                col += pts[:, 1] * rot[i, 1]
-                col += pts[:, 2] * rot[i, 2]
-                col += float(shift[i])
-                cols.append(col)
-        origin = pose[:3, 3].copy()
-        npts = len(cols[0])
-        self._scans += 1
-        self._stats["scans"] += 1
-        self._stats["points_merged"] += npts
-
-        march = None
-        if self.params.clear_free_space and npts:
-            march = self._begin_clear(cols, origin)
-        slots, keys = self._merge(cols, float(stamp), origin, march)
-        lo = np.array([c.min() for c in cols]) if npts else np.full(3, np.inf)
-        hi = np.array([c.max() for c in cols]) if npts else np.full(3, -np.inf)
-        removed = self._clear_and_forget(march, origin, float(stamp))
+        slots, keys, lo, hi = self._merge_scan(points, pose, stamp, in_map_frame)
+        removed = self.settle()
         # The scan's keys are those of its slots: no gather from the store unless clearing
         # or forgetting removed some of them.
         alive = self._alive[slots]
@@ -270,13 +236,33 @@ class VoxelMap(Merging, Clearing, Forgetting):
             keys = keys[alive]
         return Touched(keys, removed, lo, hi)
 
-    def _clear_and_forget(self, march: March | None, origin: np.ndarray, stamp: float):
-        """The end of a scan's integration: free-space clearing along its rays (``march``:
-        None when not clearing), then the radius, age and cap pass when due; returns the
-        removed (R, 3) keys."""
+    def merge(
+        self,
+        points: np.ndarray,
+        pose: np.ndarray,
+        stamp: float,
+        *,
+        in_map_frame: bool = False,
+    ) -> Touched:
+        """:meth:`integrate`'s first half: the scan's voxels merged (its points, pose and stamp
+        as there); its free-space clearing and the forgetting pass wait for :meth:`settle`
+        (``removed`` is empty). The node takes its detection's points between the two, so the
+        clearing runs beside the detection instead of before it. A merge settles a scan
+        left unsettled first (its removed keys then go unreported)."""
+        _, keys, lo, hi = self._merge_scan(points, pose, stamp, in_map_frame)
+        return Touched(keys, np.zeros((0, 3), np.int64), lo, hi)
+
+    def settle(self) -> np.ndarray:
+        """:meth:`integrate`'s second half for the last merged scan: free-space clearing along
+        its rays, then the radius, age and cap pass when due; returns the removed (R, 3)
+        int64 keys (none when no scan waits)."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return np.zeros((0, 3), np.int64)
+        cols, origin, stamp = pending
         removed = []
-        if march is not None:
-            removed.append(self._clear(march, origin))
+        if self.params.clear_free_space and len(cols[0]):
+            removed.append(self._clear(cols, origin))
         removed.append(self._maybe_forget(stamp, origin))
         return np.concatenate(removed)
 

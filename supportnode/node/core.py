@@ -6,13 +6,15 @@ No threads, no locks, no sockets. The two calls split the work by who owns what:
   merges the scan and, when a detection is due, returns a `Job` holding everything the
   detection needs (a snapshot of the map's points in the detection frame, the region the
   scans changed, the map's identity and version), so the detection never reads the map;
+  `settle` then clears along the scan's rays, once the job is out (the node: once its
+  surfaces are): the job has the map's points from before, the next job sees the clearing;
 - `detect` (the detecting side) owns the trackers and the previous detection: it detects on
   the job's points (only on the changed region when that equals a full recompute, or the
   previous result when the map did not change), assigns stable ids and makes the messages.
 
 A map reset (a source that restarted) starts a new map *generation* on the receiving side;
 the detecting side resets its trackers when it first sees a job of a newer generation, so
-neither side writes the other's state. `Node.process` is ``detect(ingest(cloud))``.
+neither side writes the other's state. `Node.process` is `ingest`, `detect`, then `settle`.
 """
 
 from __future__ import annotations
@@ -21,20 +23,19 @@ import dataclasses
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
 from supportnode.detection.policy import is_safe
 from supportnode.errors import InputError
 from supportnode.geometry.transform import quaternion_matrix, transform_points
-from supportnode.map import Touched, VoxelMap
+from supportnode.map import VoxelMap
 from supportnode.msgs import ObstacleClusters, PointCloud, SupportSurfaces
 from supportnode.node import incremental
 from supportnode.node.gravity import Gravity, report_verdict
 from supportnode.node.incremental import Items
 from supportnode.node.intake import BACKWARD_S
+from supportnode.node.job import Job, MapLike, NodeOutput, Partial
 from supportnode.node.latency import RateLimitedLog
 from supportnode.node.tracking import ClusterTracker, SurfaceTracker
 from supportnode.params import DetectParams
@@ -65,80 +66,6 @@ INGEST_COUNTERS = (
     "gravity_outliers",
 )
 DETECT_COUNTERS = ("detections", "incremental_detections", "detections_reused")
-
-
-class MapLike(Protocol):
-    """What the core needs of a map (`supportnode.map.VoxelMap`): ``version`` changes
-    whenever its points may have (the core reuses the previous detection of an unchanged
-    map: its result is the same); ``integrate`` says what a scan changed (`Touched`: the
-    detection then looks again there only); ``centroids`` is the map as published."""
-
-    version: int
-
-    def integrate(self, points: np.ndarray, pose: np.ndarray, stamp: float) -> Touched: ...
-    def points(self) -> np.ndarray: ...
-    def centroids(self, max_points: int | None = None) -> np.ndarray: ...
-    def stats(self) -> dict[str, int]: ...
-
-
-@dataclass
-class NodeOutput:
-    """What one scan produced.
-
-    surfaces, obstacles: the messages to publish; None when the scan only updated the map
-    (``node.detection_rate``). timings: seconds per stage (gravity, map, points, surfaces,
-    objects, free_space, track, messages, total). new_ids / gone_ids: stable ids that appeared /
-    vanished, per kind ("surfaces", "obstacles"). incremental: detection ran on a crop of the map.
-    reused: the map had not changed since the previous detection, whose result this is.
-    items: the detection behind the messages (detection ids, not stable ids).
-    """
-
-    surfaces: SupportSurfaces | None
-    obstacles: ObstacleClusters | None
-    timings: dict[str, float] = field(default_factory=dict)
-    new_ids: dict[str, list[int]] = field(default_factory=dict)
-    gone_ids: dict[str, list[int]] = field(default_factory=dict)
-    incremental: bool = False
-    items: Items | None = None
-    reused: bool = False
-
-
-@dataclass
-class Job:
-    """A merged scan due for detection, with what its detection needs (no map access).
-
-    points: (P, 3) float64 detection-frame points of the map after the scan, metres.
-    region: x, y box (lo, hi) in the detection frame of what changed since the previous
-    job handed over (`merged_with` widens it when a job replaces an untaken one).
-    """
-
-    points: np.ndarray
-    rotation: np.ndarray  # (3, 3) map -> detection frame (gravity correction)
-    sensor_z: float  # the sensor's height in the detection frame, m
-    stamp: float
-    frame: str
-    generation: int  # of the map it went into (a reset starts a new one)
-    source: tuple[int, int | None]  # (generation, map version): equal sources, equal points
-    region: tuple[np.ndarray, np.ndarray]
-    timings: dict[str, float] = field(default_factory=dict)  # of its ingest
-    t_recv: float = 0.0  # perf_counter when it was received (spin)
-
-    def merged_with(self, older: Job) -> Job:
-        """This job, its region widened by an older one that no detection took."""
-        lo = np.minimum(self.region[0], older.region[0])
-        hi = np.maximum(self.region[1], older.region[1])
-        return dataclasses.replace(self, region=(lo, hi))
-
-
-@dataclass
-class Partial:
-    """A detection half done (`NodeCore.detect_surfaces`): ``out.surfaces`` is final,
-    `NodeCore.detect_objects` adds ``out.obstacles``. sid: detection -> stable surface id."""
-
-    out: NodeOutput
-    job: Job
-    phase: incremental.Phase
-    sid: dict[int, int]
 
 
 def _empty_box() -> tuple[np.ndarray, np.ndarray]:
@@ -215,10 +142,11 @@ class NodeCore:
         report_verdict(self.log, self.cfg, self.gravity, c, cloud.seq, verdict)
         timings["gravity"] = time.perf_counter() - t
         t = time.perf_counter()
-        touched = self.map.integrate(cloud.points, pose, stamp)
+        self.settle()  # the previous scan's clearing, if nobody ran it yet
+        touched = self.map.merge(cloud.points, pose, stamp)
         self.last_stamp = stamp
         rotation = self.gravity.rotation
-        self._widen_pending(touched, rotation)
+        self._widen_pending(touched.lo, touched.hi, touched.removed, rotation)
         timings["map"] = time.perf_counter() - t
         c["scans_processed"] += 1
         self.posed, self.frame = cloud.pose is not None, cloud.frame_id
@@ -261,13 +189,28 @@ class NodeCore:
             self._last_detect = stamp
         return due
 
-    def _widen_pending(self, touched: Touched, rotation: np.ndarray) -> None:
-        """Add the x, y box (detection frame) of what ``touched`` (map frame) changed."""
-        lo, hi = np.asarray(touched.lo, float), np.asarray(touched.hi, float)
+    def settle(self) -> float:
+        """The last ingested scan's clearing (`VoxelMap.settle`); what it removes joins the
+        next detection's region. Call once the scan's job is out (the job holds the map's
+        points from before: the clearing shows in the next scan's detection). Returns the
+        seconds it took."""
+        t = time.perf_counter()
+        removed = self.map.settle()
+        if len(removed):
+            no_box = np.full(3, np.inf), np.full(3, -np.inf)
+            self._widen_pending(*no_box, removed, self.gravity.rotation)
+        return time.perf_counter() - t
+
+    def _widen_pending(
+        self, lo: np.ndarray, hi: np.ndarray, removed: np.ndarray, rotation: np.ndarray
+    ) -> None:
+        """Add the x, y box (detection frame) of a scan's box lo, hi (3,) and the voxels
+        ``removed`` (R, 3) (map frame) to the next detection's region."""
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
         corners = []
         if np.all(lo <= hi):
             corners.append(np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T)
-        removed = np.asarray(touched.removed, float)
+        removed = np.asarray(removed, float)
         if len(removed):
             size = float(self.cfg.map.voxel_size)
             rlo, rhi = removed.min(axis=0) * size, (removed.max(axis=0) + 1) * size

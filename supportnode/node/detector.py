@@ -52,12 +52,14 @@ class Detector:
         try:
             part = self.core.detect_surfaces(job)
             self.outbox.surfaces(part.out, job.t_recv)
+            self.mailbox.surfaces_sent()  # the receiving side's clearing waited for them
             self.yielded = not self.yielded and self.mailbox.yield_to_newer(job, self.wait)
             if self.yielded:
                 self.latency.add_all(part.out.timings)
                 return
             out = self.core.detect_objects(part)
         except Exception as err:
+            self.mailbox.surfaces_sent()  # none will come: the clearing need not wait
             self.wire.internal_error(f"detection of the scan at {job.stamp:.3f}", err)
             return
         out.timings["detect"] = time.perf_counter() - t

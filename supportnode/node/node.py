@@ -50,8 +50,9 @@ from supportnode.node.diagnostics import diagnostics_message
 from supportnode.node.gravity import Gravity
 from supportnode.node.intake import scan_problem
 from supportnode.node.latency import LatencyWindow
-from supportnode.node.mailbox import Mailbox
+from supportnode.node.mailbox import Doorbell, Mailbox
 from supportnode.node.outbox import Outbox
+from supportnode.node.receiver import POLL_S, Receiver
 from supportnode.node.rehearsal import warm_up
 from supportnode.node.sockets import NodeSockets
 from supportnode.params import DetectParams
@@ -60,8 +61,6 @@ __all__ = ["MapLike", "Node", "NodeOutput", "quaternion_matrix"]
 
 log = logging.getLogger("supportnode.node")
 
-# How long one wait for a scan (or a job) lasts: bounds the reaction time to a stop request.
-_POLL_S = 0.05
 # Points of the published map at most (3 MB a message): a map of millions of voxels is thinned.
 MAP_MAX_POINTS = 262_144
 Hook = Callable[[], None] | None  # `Node.spin`'s on_ready
@@ -104,6 +103,7 @@ class Node(Closing):
             lambda sock, line: self.log.warning("%s: %s %s", self.cfg.name, sock, line),
         )
         self._outbox: Outbox | None = None
+        self._bell: Doorbell | None = None  # spin's: rung by the detector when surfaces are out
         self._mailbox = Mailbox()
         self._stop = threading.Event()
         self._ready = False  # kernels warmed, subscribed: the `ready` gauge
@@ -157,10 +157,12 @@ class Node(Closing):
         return self._process(cloud)
 
     def _process(self, cloud: PointCloud) -> NodeOutput:
-        """`process` of a scan the intake admitted: ``detect(ingest(cloud))``."""
+        """`process` of a scan the intake admitted: `ingest`, `settle`, then `detect`."""
         t_start = time.perf_counter()
         job = self.core.ingest(cloud)
+        clear = self.core.settle()
         out = NodeOutput(None, None, {} if job is None else job.timings)
+        out.timings["clear"] = clear
         if job is not None:
             out = self.core.detect(job)
         out.timings["total"] = time.perf_counter() - t_start
@@ -232,21 +234,24 @@ class Node(Closing):
             if on_ready is not None:
                 on_ready()
             self._ready = True
-            self._mailbox = Mailbox()
+            self._bell = Doorbell()
+            self._mailbox = Mailbox(on_sent=self._bell.ring)
             assert self._outbox is not None
             detecting = Detector(
-                self.core, self._mailbox, self._outbox, self.latency, self._wire, _POLL_S
+                self.core, self._mailbox, self._outbox, self.latency, self._wire, POLL_S
             )
             detector = threading.Thread(
                 target=detecting.run, args=(self._stop,), name="detect", daemon=True
             )
             detector.start()
             try:
-                self._receive_loop(duration)
+                self._receive(duration)
             finally:
                 self._stop.set()
                 self._mailbox.close()
                 detector.join(5.0)
+                self._bell.close()
+                self._bell = None
         finally:
             self._ready = False
             for sig, old in restore.items():
@@ -261,12 +266,9 @@ class Node(Closing):
         took = warm_up(self.params, self.cfg.threads or None)
         self.log.info("%s: kernels ready in %.2f s", self.cfg.name, took)
 
-    def _receive_loop(self, duration: float | None) -> None:
-        assert self._sub is not None
-        end = None if duration is None else time.monotonic() + duration
-        period = self.cfg.diagnostics_period
-        next_diag = time.monotonic() + period
-        next_map = time.monotonic() + self.cfg.map_period
+    def _receive(self, duration: float | None) -> None:
+        """The receiving thread's loop (`Receiver`), diagnostics and the map when due."""
+        assert self._sub is not None and self._bell is not None
         self.log.info(
             "%s: scans from %s (topic %s), results on %s",
             self.cfg.name,
@@ -274,49 +276,22 @@ class Node(Closing):
             self.cfg.scan_topic,
             self.pub_endpoint,
         )
-        while not self._stop.is_set():
-            now = time.monotonic()
-            if end is not None and now >= end:
-                break
-            oversized = self._sub.oversized
-            frames = self._sub.recv(min(_POLL_S, max(0.0, next_diag - now)))
-            for _ in range(self._sub.oversized - oversized):
-                size = self._sub.last_oversized[1] if self._sub.last_oversized else 0
-                self._wire.reject(
-                    "oversized",
-                    f"message of {size} bytes exceeds max_message_bytes "
-                    f"{self.cfg.max_message_bytes}",
-                )
-            if frames is not None:
-                self._ingest(frames)
-            if time.monotonic() >= next_diag:
-                self._publish_safely("diagnostics", self.publish_diagnostics)
-                next_diag = time.monotonic() + period
-            if self.cfg.map_period > 0 and time.monotonic() >= next_map:
-                self._publish_safely("map", self.publish_map)
-                next_map = time.monotonic() + self.cfg.map_period
+        receiver = Receiver(
+            self.core, self._sub, self._wire, self._mailbox, self._bell, self.latency, self.cfg
+        )
+        start = time.monotonic()
+        due = {"diag": start + self.cfg.diagnostics_period, "map": start + self.cfg.map_period}
 
-    def _ingest(self, frames: Any) -> None:
-        """Receiving thread: merge a decoded scan; its job, when due, to the mailbox."""
-        msg, decode = self._wire.decoded(frames)
-        if msg is None:
-            return
-        t_recv = time.perf_counter() - decode  # when decoding began
-        self._mailbox.merging(True)  # a detector done with surfaces may wait for this one
-        try:
-            job = self.core.ingest(msg)
-            self.latency.add("decode", decode)
-            if job is not None:
-                self.latency.add_all(job.timings)
-                job.timings.clear()  # timed here, once
-                job.t_recv = t_recv
-                self._mailbox.put(job)
-        except SupportNodeError as err:
-            self._wire.reject("unusable", f"scan seq {msg.seq}: {err}")
-        except Exception as err:
-            self._wire.internal_error(f"scan seq {msg.seq}", err)
-        finally:
-            self._mailbox.merging(False)
+        def periodic(now: float) -> float:
+            if now >= due["diag"]:
+                self._publish_safely("diagnostics", self.publish_diagnostics)
+                due["diag"] = time.monotonic() + self.cfg.diagnostics_period
+            if self.cfg.map_period > 0 and now >= due["map"]:
+                self._publish_safely("map", self.publish_map)
+                due["map"] = time.monotonic() + self.cfg.map_period
+            return due["diag"]
+
+        receiver.run(self._stop, None if duration is None else start + duration, periodic)
 
     # ------------------------------------------------------------------ diagnostics, map
 

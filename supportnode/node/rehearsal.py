@@ -75,6 +75,7 @@ def rehearse(params: DetectParams, map_factory: Callable | None = None) -> float
     try:
         core = NodeCore(params, map_factory=map_factory, logger=quiet)
         job = core.ingest(rehearsal_scan())
+        core.settle()
         if job is not None:
             core.detect(job)
     except Exception as exc:  # a bug the first scan will meet too, and report

@@ -497,17 +497,17 @@ def _slow_stages(monkeypatch, merge_s: float, detect_s: float) -> None:
     from supportnode.map import VoxelMap
     from supportnode.node import incremental
 
-    integrate, full = VoxelMap.integrate, incremental.begin_full
+    merge, full = VoxelMap.merge, incremental.begin_full
 
-    def slow_integrate(self, *a, **kw):
+    def slow_merge(self, *a, **kw):
         time.sleep(merge_s)
-        return integrate(self, *a, **kw)
+        return merge(self, *a, **kw)
 
     def slow_full(*a, **kw):
         time.sleep(detect_s)
         return full(*a, **kw)
 
-    monkeypatch.setattr(VoxelMap, "integrate", slow_integrate)
+    monkeypatch.setattr(VoxelMap, "merge", slow_merge)
     monkeypatch.setattr(incremental, "begin_full", slow_full)
 
 

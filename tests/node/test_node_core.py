@@ -60,6 +60,29 @@ def _summary(surfaces: SupportSurfaces, obstacles: ObstacleClusters):
     return surfaces.seq, s, c
 
 
+def test_a_jobs_points_are_the_map_before_its_scans_clearing(rng):
+    """`ingest` hands over the map's points with the scan merged; `settle` then clears along
+    its rays: the job keeps what it took, and the next job's region covers what went."""
+    core = NodeCore()
+    gone = np.zeros((0, 2))  # x, y of the voxel centres the last clearing removed
+    for cloud in _scans(rng, 10):
+        job = core.ingest(cloud)
+        assert job is not None
+        if len(gone):  # the previous scan's clearing: inside this job's region
+            lo, hi = job.region
+            assert (lo <= gone.min(axis=0)).all() and (gone.max(axis=0) <= hi).all()
+        before = core.map.points().copy()
+        assert np.array_equal(job.points, before)
+        keys = {tuple(k) for k in core.map.voxels()["keys"]}
+        core.settle()
+        left = {tuple(k) for k in core.map.voxels()["keys"]}
+        assert np.array_equal(job.points, before)  # the job's points are its own
+        gone = (np.array(sorted(keys - left)).reshape(-1, 3)[:, :2] + 0.5) * core.map.size
+        if len(gone):
+            assert len(core.map.points()) < len(before)
+    assert core.map.stats()["cleared"] > 0
+
+
 def test_published_results_equal_node_process(rng):
     """Over sockets, one scan at a time (none skipped), the node publishes for each scan what
     `Node.process` returns on the same scans: ids, heights, areas, obstacles, seq."""

@@ -255,7 +255,7 @@ def test_internal_errors_are_logged_rate_limited(monkeypatch, caplog):
     def broken(self, *a, **kw):
         raise RuntimeError("map bug")
 
-    monkeypatch.setattr(node_map.VoxelMap, "integrate", broken)
+    monkeypatch.setattr(node_map.VoxelMap, "merge", broken)
     with caplog.at_level("WARNING", logger="supportnode.node"), hostile() as d:
         for i in range(20):
             d.good(1.0 + 0.1 * i)

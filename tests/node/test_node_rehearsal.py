@@ -82,7 +82,7 @@ def test_a_failing_rehearsal_is_one_warning_not_the_end(monkeypatch, caplog):
     def broken(self, *a, **kw):
         raise RuntimeError("map bug")
 
-    monkeypatch.setattr(store.VoxelMap, "integrate", broken)
+    monkeypatch.setattr(store.VoxelMap, "merge", broken)
     from supportnode.node.rehearsal import rehearse
 
     with caplog.at_level("WARNING", logger="supportnode.node"):
