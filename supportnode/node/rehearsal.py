@@ -75,9 +75,9 @@ def rehearse(params: DetectParams, map_factory: Callable | None = None) -> float
     try:
         core = NodeCore(params, map_factory=map_factory, logger=quiet)
         job = core.ingest(rehearsal_scan())
-        core.settle()
         if job is not None:
             core.detect(job)
+        core.settle()  # as the node: the clearing after the detection took its points
     except Exception as exc:  # a bug the first scan will meet too, and report
         logging.getLogger("supportnode.node").warning("rehearsal detection failed: %r", exc)
     return time.perf_counter() - t
