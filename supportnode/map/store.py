@@ -246,9 +246,9 @@ class VoxelMap(Merging, Clearing, Forgetting):
     ) -> Touched:
         """:meth:`integrate`'s first half: the scan's voxels merged (its points, pose and stamp
         as there); its free-space clearing and the forgetting pass wait for :meth:`settle`
-        (``removed`` is empty). The node takes its detection's points between the two, so the
-        clearing runs beside the detection instead of before it. A merge settles a scan
-        left unsettled first (its removed keys then go unreported)."""
+        (``removed`` is empty). The node takes its detection's points between the two: the
+        clearing then stays off the detection's path. A merge settles a scan left unsettled
+        first (its removed keys then go unreported)."""
         _, keys, lo, hi = self._merge_scan(points, pose, stamp, in_map_frame)
         return Touched(keys, np.zeros((0, 3), np.int64), lo, hi)
 
